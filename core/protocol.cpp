@@ -1,0 +1,195 @@
+#include "core/protocol.hpp"
+
+#include <cmath>
+#include <stdexcept>
+
+#include <nlohmann/json.hpp>
+
+namespace stereod
+{
+
+std::string_view to_string(PointLabel label) noexcept
+{
+	switch (label) {
+	case PointLabel::Static:
+		return "static";
+	case PointLabel::Dynamic:
+		return "dynamic";
+	case PointLabel::Uncertain:
+		return "uncertain";
+	}
+	return "uncertain";
+}
+
+namespace protocol
+{
+namespace
+{
+
+using nlohmann::json;
+
+// Pixel coordinates to 0.01 px and times to 0.001 ms: enough for any consumer, and it keeps lines short.
+// Dividing by the power of ten (not multiplying by 0.01) gives the double nearest the decimal, which the
+// JSON writer then prints in its shortest form.
+double round_to(double value, double step)
+{
+	const double scale = std::round(1.0 / step);
+	return std::round(value * scale) / scale;
+}
+
+PointLabel parse_label(const std::string &text)
+{
+	if (text == "static")
+		return PointLabel::Static;
+	if (text == "dynamic")
+		return PointLabel::Dynamic;
+	if (text == "uncertain")
+		return PointLabel::Uncertain;
+	throw std::runtime_error("unknown point label '" + text + "'");
+}
+
+FrameStatus parse_status(const std::string &text)
+{
+	if (text == "ok")
+		return FrameStatus::Ok;
+	if (text == "incomplete")
+		return FrameStatus::Incomplete;
+	if (text == "corrupt")
+		return FrameStatus::Corrupt;
+	throw std::runtime_error("unknown frame status '" + text + "'");
+}
+
+} // namespace
+
+std::string frame_message(const FrameResult &result)
+{
+	json message = {
+		{"v", kVersion},
+		{"type", "frame"},
+		{"seq", result.seq},
+		{"t_capture_ns", result.t_capture_ns},
+		{"t_host_ns", result.t_host_ns},
+		{"t_publish_ns", result.t_publish_ns},
+		{"lr_skew_ns", result.lr_skew_ns},
+		{"source", result.source},
+		{"status", to_string(result.status)},
+		{"width", result.width},
+		{"height", result.height},
+	};
+	json timing = json::object();
+	for (const auto &stage : result.timing)
+		timing[stage.name] = round_to(stage.ms, 0.001);
+	message["timing_ms"] = std::move(timing);
+
+	json points = json::array();
+	for (const auto &point : result.points) {
+		json p = {{"u", round_to(point.u, 0.01)},
+			  {"v", round_to(point.v, 0.01)},
+			  {"label", to_string(point.label)},
+			  {"pu", round_to(point.prev_u, 0.01)},
+			  {"pv", round_to(point.prev_v, 0.01)}};
+		if (point.xyz_m)
+			p["xyz_m"] = {round_to((*point.xyz_m)[0], 0.001), round_to((*point.xyz_m)[1], 0.001),
+				      round_to((*point.xyz_m)[2], 0.001)};
+		points.push_back(std::move(p));
+	}
+	message["points"] = std::move(points);
+
+	if (result.ego)
+		message["ego"] = {{"homography", result.ego->homography}, {"inliers", result.ego->inliers}};
+	else
+		message["ego"] = nullptr;
+
+	json groups = json::array();
+	for (const auto &group : result.groups)
+		groups.push_back({{"id", group.id},
+				  {"position_m", group.position_m},
+				  {"velocity_mps", group.velocity_mps},
+				  {"heading_rad", group.heading_rad},
+				  {"points", group.point_count}});
+	message["groups"] = std::move(groups);
+	return message.dump();
+}
+
+FrameResult parse_frame_message(const json &message)
+{
+	if (message.at("type").get<std::string>() != "frame")
+		throw std::runtime_error("not a frame message");
+	if (message.at("v").get<int>() != kVersion)
+		throw std::runtime_error("unsupported protocol version " + message.at("v").dump());
+	FrameResult result;
+	result.seq = message.at("seq").get<uint64_t>();
+	result.t_capture_ns = message.at("t_capture_ns").get<int64_t>();
+	result.t_host_ns = message.at("t_host_ns").get<int64_t>();
+	result.t_publish_ns = message.at("t_publish_ns").get<int64_t>();
+	result.lr_skew_ns = message.value("lr_skew_ns", int64_t{0});
+	result.source = message.at("source").get<std::string>();
+	result.status = parse_status(message.at("status").get<std::string>());
+	result.width = message.value("width", 0);
+	result.height = message.value("height", 0);
+	for (const auto &[name, ms] : message.at("timing_ms").items())
+		result.timing.push_back({name, ms.get<double>()});
+	for (const auto &p : message.at("points")) {
+		LabelledPoint point;
+		point.u = p.at("u").get<float>();
+		point.v = p.at("v").get<float>();
+		point.label = parse_label(p.at("label").get<std::string>());
+		point.prev_u = p.value("pu", point.u);
+		point.prev_v = p.value("pv", point.v);
+		if (p.contains("xyz_m"))
+			point.xyz_m = p.at("xyz_m").get<std::array<float, 3>>();
+		result.points.push_back(point);
+	}
+	if (const auto &ego = message.at("ego"); !ego.is_null())
+		result.ego = EgoMotion{ego.at("homography").get<std::array<double, 9>>(), ego.at("inliers").get<int>()};
+	for (const auto &g : message.at("groups"))
+		result.groups.push_back({g.at("id").get<int>(), g.at("position_m").get<std::array<double, 3>>(),
+					 g.at("velocity_mps").get<std::array<double, 3>>(),
+					 g.at("heading_rad").get<double>(), g.at("points").get<int>()});
+	return result;
+}
+
+std::string status_message(const StatusReport &status)
+{
+	json message = {
+		{"v", kVersion},
+		{"type", "status"},
+		{"t_host_ns", status.t_host_ns},
+		{"uptime_s", round_to(status.uptime_s, 0.001)},
+		{"source", status.source},
+		{"source_state", status.source_state},
+		{"fps",
+		 {{"capture", round_to(status.capture_fps, 0.01)}, {"publish", round_to(status.publish_fps, 0.01)}}},
+		{"frames", {{"captured", status.frames_captured}, {"published", status.frames_published}}},
+		{"drops", status.drops},
+		{"latency_ms",
+		 {{"capture_to_publish",
+		   {{"p50", round_to(status.capture_to_publish.p50_ms, 0.001)},
+		    {"p90", round_to(status.capture_to_publish.p90_ms, 0.001)},
+		    {"p99", round_to(status.capture_to_publish.p99_ms, 0.001)},
+		    {"max", round_to(status.capture_to_publish.max_ms, 0.001)},
+		    {"samples", status.capture_to_publish.samples}}}}},
+		{"clients", status.clients},
+	};
+	return message.dump();
+}
+
+std::string lag_message(int64_t t_host_ns, uint64_t dropped_total, uint64_t dropped_since_last)
+{
+	return json{{"v", kVersion},
+		    {"type", "lag"},
+		    {"t_host_ns", t_host_ns},
+		    {"dropped", dropped_since_last},
+		    {"dropped_total", dropped_total}}
+		.dump();
+}
+
+std::string hello_message(int64_t t_host_ns, const std::string &source, int width, int height)
+{
+	return json{{"v", kVersion},	{"type", "hello"}, {"t_host_ns", t_host_ns},
+		    {"source", source}, {"width", width},  {"height", height}}
+		.dump();
+}
+
+} // namespace protocol
+} // namespace stereod

@@ -1,0 +1,53 @@
+#pragma once
+// The wire form of results: newline-delimited JSON, documented in docs/protocol.md. Pure functions: they
+// build strings and parse them, the socket and file writers live elsewhere.
+#include <cstdint>
+#include <map>
+#include <string>
+
+#include <nlohmann/json_fwd.hpp>
+
+#include "core/result.hpp"
+
+namespace stereod::protocol
+{
+
+inline constexpr int kVersion = 1;
+
+/// One `frame` message, without the trailing newline.
+std::string frame_message(const FrameResult &result);
+
+/// Parses a `frame` message back (used by the tools: eval, render, watch). Throws on malformed input.
+FrameResult parse_frame_message(const nlohmann::json &message);
+
+struct LatencySummary {
+	double p50_ms = 0;
+	double p90_ms = 0;
+	double p99_ms = 0;
+	double max_ms = 0;
+	size_t samples = 0;
+};
+
+struct StatusReport {
+	int64_t t_host_ns = 0;
+	double uptime_s = 0;
+	std::string source;
+	std::string source_state; ///< "streaming", "reconnecting", "finished"
+	double capture_fps = 0;
+	double publish_fps = 0;
+	uint64_t frames_captured = 0;
+	uint64_t frames_published = 0;
+	std::map<std::string, uint64_t> drops; ///< counter name -> frames (or messages) lost there
+	LatencySummary capture_to_publish;
+	size_t clients = 0;
+};
+
+std::string status_message(const StatusReport &status);
+
+/// Told to one client after its queue overflowed: how many of its messages were discarded.
+std::string lag_message(int64_t t_host_ns, uint64_t dropped_total, uint64_t dropped_since_last);
+
+/// The first line every client receives.
+std::string hello_message(int64_t t_host_ns, const std::string &source, int width, int height);
+
+} // namespace stereod::protocol

@@ -1,0 +1,68 @@
+#pragma once
+// What processing one frame produces. Every field is filled only by a stage that computed it: an empty
+// `points` or a missing `ego` means no stage produced them, never a placeholder.
+#include <array>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/frame.hpp"
+
+namespace stereod
+{
+
+enum class PointLabel : uint8_t {
+	Static,
+	Dynamic,
+	Uncertain, ///< matched, but neither test could decide (the seed's mismatches are reported as this)
+};
+
+std::string_view to_string(PointLabel label) noexcept;
+
+struct LabelledPoint {
+	float u = 0; ///< pixel column in the left image of this frame
+	float v = 0; ///< pixel row
+	PointLabel label = PointLabel::Uncertain;
+	float prev_u = 0; ///< where the point was matched in the previous frame
+	float prev_v = 0;
+	std::optional<std::array<float, 3>> xyz_m; ///< left-camera coordinates, when depth is known
+};
+
+/// Frame-to-frame image motion of the static scene.
+struct EgoMotion {
+	std::array<double, 9> homography{}; ///< maps previous-frame pixels to this frame's, row-major
+	int inliers = 0;		    ///< static points the final homography was fitted to
+};
+
+/// A moving-target group (filled by the grouping stage of a later issue).
+struct TargetGroup {
+	int id = 0;
+	std::array<double, 3> position_m{};
+	std::array<double, 3> velocity_mps{};
+	double heading_rad = 0;
+	int point_count = 0;
+};
+
+struct StageTime {
+	std::string name;
+	double ms = 0;
+};
+
+struct FrameResult {
+	uint64_t seq = 0;
+	int64_t t_capture_ns = 0; ///< device timestamp of the exposure
+	int64_t t_host_ns = 0;	  ///< CLOCK_MONOTONIC at arrival on the host
+	int64_t t_publish_ns = 0; ///< CLOCK_MONOTONIC when the message left the pipeline
+	int64_t lr_skew_ns = 0;
+	std::string source;
+	FrameStatus status = FrameStatus::Ok;
+	int width = 0;
+	int height = 0;
+	std::vector<StageTime> timing;
+	std::vector<LabelledPoint> points;
+	std::optional<EgoMotion> ego;
+	std::vector<TargetGroup> groups;
+};
+
+} // namespace stereod

@@ -1,0 +1,106 @@
+#pragma once
+// Static/dynamic classification of matched feature points by the second re-projection error with area and
+// RGB texture constraints (seed 000: ../shared/seeds/000_*.txt, equations 1-7, Tables 1-3).
+//
+// Each step is its own pure function so it can be tested on constructed data; classify() chains them:
+//   1. initial homography by RANSAC over all matches                          (Table 1)
+//   2. re-projection error, eq. 1, against a Mahalanobis threshold -> initial static / uncertain
+//   3. static area constraint, eq. 5, adaptive window theta*Umax, eta*Vmax   (Table 2)
+//   4. static texture constraint, eqs. 2-4: d_n < T                          (Table 2)
+//   5. homography re-estimated from the refined static set
+//   6. second re-projection of the uncertain points with that homography
+//   7. dynamic area constraint, eq. 5 with the dynamic coefficients          (Table 3)
+//   8. double texture constraint, eqs. 6-7: d_n < T and dd_n > T -> dynamic  (Table 3)
+// Points rejected by a constraint are the seed's mismatches; they are labelled Uncertain.
+#include <optional>
+#include <span>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "core/result.hpp"
+
+namespace stereod::vision
+{
+
+struct ClassifierParams {
+	double ransac_threshold_px = 3.0;   ///< RANSAC inlier distance for both homography fits
+	double reprojection_sigma_px = 1.0; ///< feature position noise (isotropic Gaussian) for eq. 1
+	double reprojection_chi2 = 13.28;   ///< Mahalanobis gate on eq. 1 (chi-square, 4 dof, 99%)
+	double static_theta = 0.5;	    ///< eq. 5 static window: du^2 < theta * Umax
+	double static_eta = 0.5;	    ///< eq. 5 static window: dv^2 < eta * Vmax
+	double dynamic_theta = 1.0;	    ///< eq. 5 on the dynamic candidates' motion relative to the scene
+	double dynamic_eta = 1.0;
+	double area_floor_px = 2.0;	      ///< windows never shrink below this many pixels (still camera)
+	double dynamic_max_motion_px = 150.0; ///< a mover cannot move farther than this between frames
+	double alpha = 0.299;		      ///< eq. 3 weight of R
+	double beta = 0.587;		      ///< eq. 3 weight of G
+	double gamma = 0.114;		      ///< eq. 3 weight of B (alpha + beta + gamma = 1, eq. 4)
+	double texture_threshold = 20.0;      ///< T, in 8-bit intensity units
+	int colour_radius = 2;		      ///< patch radius for colours sampled at projected points
+	int min_matches = 12;		      ///< fewer matches: no homography, everything Uncertain
+};
+
+/// One match between frame n-1 and frame n, with the colours under both ends.
+struct PointPair {
+	cv::Point2f prev;
+	cv::Point2f cur;
+	cv::Vec3f prev_colour; ///< B,G,R
+	cv::Vec3f cur_colour;
+};
+
+struct HomographyFit {
+	cv::Matx33d h;
+	std::vector<bool> inliers;
+	int inlier_count = 0;
+};
+
+/// RANSAC homography from `from` to `to`; nothing when there are too few points or no consistent model.
+std::optional<HomographyFit> fit_homography(std::span<const cv::Point2f> from, std::span<const cv::Point2f> to,
+					    double ransac_threshold_px, int min_points);
+
+cv::Point2f project(const cv::Matx33d &h, cv::Point2f p);
+
+/// Eq. 1: d(x, H^-1 x')^2 + d(x', H x)^2, in squared pixels.
+double reprojection_error(const cv::Matx33d &h, const cv::Matx33d &h_inv, cv::Point2f prev, cv::Point2f cur);
+
+/// Eq. 1 against the Mahalanobis gate: true for a static candidate.
+bool passes_reprojection(double error_px2, const ClassifierParams &params);
+
+/// The adaptive window of eq. 5: the largest squared displacement along u and v, scaled.
+struct AreaWindow {
+	double max_du2 = 0;
+	double max_dv2 = 0;
+	double theta = 1;
+	double eta = 1;
+	double floor_px2 = 0;
+	[[nodiscard]] bool contains(cv::Point2f displacement) const;
+};
+AreaWindow area_window(std::span<const cv::Point2f> displacements, double theta, double eta, double floor_px);
+
+/// Eq. 3: alpha|dR| + beta|dG| + gamma|dB| between two B,G,R colours.
+double texture_distance(const cv::Vec3f &a, const cv::Vec3f &b, const ClassifierParams &params);
+
+struct ClassificationCounts {
+	int matches = 0;
+	int initial_static = 0;
+	int initial_uncertain = 0;
+	int static_after_area = 0;
+	int static_after_texture = 0;
+	int second_static = 0; ///< uncertain points the refined homography explains (and texture agrees)
+	int dynamic_candidates = 0;
+	int dynamic_after_area = 0;
+	int dynamic = 0;
+};
+
+struct Classification {
+	std::vector<PointLabel> labels;	       ///< one per input pair
+	std::optional<cv::Matx33d> homography; ///< the refined frame-to-frame homography (step 5)
+	int homography_inliers = 0;
+	ClassificationCounts counts;
+};
+
+/// The whole chain. `cur_image` is frame n (BGR or grey), sampled at projected points for eq. 6.
+Classification classify(std::span<const PointPair> pairs, const cv::Mat &cur_image, const ClassifierParams &params);
+
+} // namespace stereod::vision

@@ -1,0 +1,93 @@
+#include "core/vision/features.hpp"
+
+#include <algorithm>
+
+#include <opencv2/features2d.hpp>
+#include <opencv2/imgproc.hpp>
+
+namespace stereod::vision
+{
+
+cv::Vec3f sample_colour(const cv::Mat &image, cv::Point2f at, int radius)
+{
+	const int cx = std::clamp(cvRound(at.x), 0, image.cols - 1);
+	const int cy = std::clamp(cvRound(at.y), 0, image.rows - 1);
+	const int x0 = std::max(cx - radius, 0), x1 = std::min(cx + radius, image.cols - 1);
+	const int y0 = std::max(cy - radius, 0), y1 = std::min(cy + radius, image.rows - 1);
+	cv::Vec3f sum(0, 0, 0);
+	if (image.type() == CV_8UC3) {
+		for (int y = y0; y <= y1; ++y) {
+			const auto *row = image.ptr<cv::Vec3b>(y);
+			for (int x = x0; x <= x1; ++x)
+				sum += cv::Vec3f(row[x][0], row[x][1], row[x][2]);
+		}
+	} else {
+		for (int y = y0; y <= y1; ++y) {
+			const auto *row = image.ptr<uint8_t>(y);
+			for (int x = x0; x <= x1; ++x)
+				sum += cv::Vec3f(row[x], row[x], row[x]);
+		}
+	}
+	return sum / static_cast<float>((x1 - x0 + 1) * (y1 - y0 + 1));
+}
+
+std::vector<cv::KeyPoint> bucket_keypoints(std::vector<cv::KeyPoint> keypoints, cv::Size image_size, int grid_cols,
+					   int grid_rows, int max_total)
+{
+	const int cells = std::max(grid_cols * grid_rows, 1);
+	const int per_cell = std::max(max_total / cells, 1);
+	std::vector<std::vector<cv::KeyPoint>> buckets(static_cast<size_t>(cells));
+	for (const auto &kp : keypoints) {
+		const int col = std::clamp(static_cast<int>(kp.pt.x * static_cast<float>(grid_cols) /
+							    static_cast<float>(image_size.width)),
+					   0, grid_cols - 1);
+		const int row = std::clamp(static_cast<int>(kp.pt.y * static_cast<float>(grid_rows) /
+							    static_cast<float>(image_size.height)),
+					   0, grid_rows - 1);
+		buckets[static_cast<size_t>(row * grid_cols + col)].push_back(kp);
+	}
+	std::vector<cv::KeyPoint> kept;
+	kept.reserve(static_cast<size_t>(max_total));
+	std::vector<cv::KeyPoint> spare;
+	for (auto &bucket : buckets) {
+		std::sort(bucket.begin(), bucket.end(),
+			  [](const cv::KeyPoint &a, const cv::KeyPoint &b) { return a.response > b.response; });
+		const auto take = std::min(bucket.size(), static_cast<size_t>(per_cell));
+		kept.insert(kept.end(), bucket.begin(), bucket.begin() + static_cast<std::ptrdiff_t>(take));
+		spare.insert(spare.end(), bucket.begin() + static_cast<std::ptrdiff_t>(take), bucket.end());
+	}
+	// Cells without texture leave budget unused; give it to the strongest of the rest.
+	if (kept.size() < static_cast<size_t>(max_total) && !spare.empty()) {
+		const auto extra = std::min(spare.size(), static_cast<size_t>(max_total) - kept.size());
+		std::partial_sort(spare.begin(), spare.begin() + static_cast<std::ptrdiff_t>(extra), spare.end(),
+				  [](const cv::KeyPoint &a, const cv::KeyPoint &b) { return a.response > b.response; });
+		kept.insert(kept.end(), spare.begin(), spare.begin() + static_cast<std::ptrdiff_t>(extra));
+	}
+	return kept;
+}
+
+FrameFeatures extract_features(const cv::Mat &image, const FeatureParams &params)
+{
+	cv::Mat grey;
+	if (image.channels() == 3)
+		cv::cvtColor(image, grey, cv::COLOR_BGR2GRAY);
+	else
+		grey = image;
+
+	FrameFeatures features;
+	// Detect three times the budget, then bucket: the grid decides which survive, not raw response.
+	auto orb = cv::ORB::create(params.max_features * 3, params.orb_scale, params.orb_levels, 31, 0, 2,
+				   cv::ORB::HARRIS_SCORE, 31, params.orb_fast_threshold);
+	std::vector<cv::KeyPoint> detected;
+	orb->detect(grey, detected);
+	features.keypoints = bucket_keypoints(std::move(detected), grey.size(), params.grid_cols, params.grid_rows,
+					      params.max_features);
+	orb->compute(grey, features.keypoints, features.descriptors);
+	features.norm_type = cv::NORM_HAMMING;
+	features.colours.reserve(features.keypoints.size());
+	for (const auto &kp : features.keypoints)
+		features.colours.push_back(sample_colour(image, kp.pt, params.colour_radius));
+	return features;
+}
+
+} // namespace stereod::vision

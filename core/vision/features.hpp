@@ -1,0 +1,40 @@
+#pragma once
+// Feature extraction: keypoints, descriptors and the colour under each keypoint, computed once per frame
+// and reused as "frame n-1" on the next step.
+#include <string_view>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+namespace stereod::vision
+{
+
+struct FeatureParams {
+	int max_features = 1000; ///< after bucketing
+	int grid_cols = 8;	 ///< the image is cut into grid_cols x grid_rows cells; each keeps its
+	int grid_rows = 6;	 ///< strongest max_features / cells points, so points cover the image
+	int orb_levels = 4;	 ///< pyramid levels (OpenCV's default 8 costs twice as much for little gain here)
+	float orb_scale = 1.2F;
+	int orb_fast_threshold = 12;
+	int colour_radius = 2; ///< colours are the mean of a (2r+1)^2 patch, less sensitive to noise than a pixel
+};
+
+/// Keypoints and what the classifier needs of them later, so the image itself can be released.
+struct FrameFeatures {
+	std::vector<cv::KeyPoint> keypoints;
+	cv::Mat descriptors;		  ///< one row per keypoint
+	int norm_type = cv::NORM_HAMMING; ///< how descriptors compare
+	std::vector<cv::Vec3f> colours;	  ///< mean B,G,R around each keypoint
+};
+
+/// Mean colour (B,G,R; grey images repeat the one channel) of the patch around `at`, clamped to the image.
+cv::Vec3f sample_colour(const cv::Mat &image, cv::Point2f at, int radius);
+
+/// Keeps at most `max_total` keypoints, spread over a grid: each cell keeps its strongest.
+std::vector<cv::KeyPoint> bucket_keypoints(std::vector<cv::KeyPoint> keypoints, cv::Size image_size, int grid_cols,
+					   int grid_rows, int max_total);
+
+/// Detects, buckets and describes; `image` is BGR or grey.
+FrameFeatures extract_features(const cv::Mat &image, const FeatureParams &params);
+
+} // namespace stereod::vision

@@ -1,0 +1,53 @@
+#include "core/vision/motion_stages.hpp"
+
+#include "core/stage_timer.hpp"
+
+namespace stereod::vision
+{
+
+FrameFeatures extract_stage(const StereoFrame &frame, const MotionParams &params, std::vector<StageTime> &timing)
+{
+	StageTimer timer(timing, "extract");
+	return extract_features(frame.left, params.features);
+}
+
+void pair_stage(const FrameFeatures *prev, const FrameFeatures &cur, const StereoFrame &frame,
+		const MotionParams &params, FrameResult &result)
+{
+	if (prev == nullptr)
+		return;
+	std::vector<Match> matches;
+	{
+		StageTimer timer(result.timing, "match");
+		matches = match_features(*prev, cur, params.matching);
+	}
+	StageTimer timer(result.timing, "classify");
+	std::vector<PointPair> pairs;
+	pairs.reserve(matches.size());
+	for (const auto &m : matches) {
+		const auto p = static_cast<size_t>(m.prev);
+		const auto c = static_cast<size_t>(m.cur);
+		pairs.push_back({prev->keypoints[p].pt, cur.keypoints[c].pt, prev->colours[p], cur.colours[c]});
+	}
+	const Classification classification = classify(pairs, frame.left, params.classifier);
+	result.points.reserve(pairs.size());
+	for (size_t i = 0; i < pairs.size(); ++i) {
+		LabelledPoint point;
+		point.u = pairs[i].cur.x;
+		point.v = pairs[i].cur.y;
+		point.prev_u = pairs[i].prev.x;
+		point.prev_v = pairs[i].prev.y;
+		point.label = classification.labels[i];
+		result.points.push_back(point);
+	}
+	if (classification.homography) {
+		EgoMotion ego;
+		for (int r = 0; r < 3; ++r)
+			for (int c = 0; c < 3; ++c)
+				ego.homography[static_cast<size_t>(r * 3 + c)] = (*classification.homography)(r, c);
+		ego.inliers = classification.homography_inliers;
+		result.ego = ego;
+	}
+}
+
+} // namespace stereod::vision

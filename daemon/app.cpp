@@ -1,0 +1,351 @@
+#include "daemon/app.hpp"
+
+#include <csignal>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <thread>
+#include <unistd.h>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <spdlog/spdlog.h>
+#include <systemd/sd-daemon.h>
+
+#include "core/clock.hpp"
+#include "core/protocol.hpp"
+#include "daemon/pipeline.hpp"
+#include "daemon/socket_server.hpp"
+
+namespace stereod::daemon
+{
+namespace
+{
+
+namespace fs = std::filesystem;
+
+/// Blocks the signals we handle in every thread (threads inherit the mask), so the main thread alone
+/// receives them synchronously with sigtimedwait: no handlers, no async-signal-safety concerns.
+sigset_t block_signals()
+{
+	sigset_t set;
+	sigemptyset(&set);
+	sigaddset(&set, SIGINT);
+	sigaddset(&set, SIGTERM);
+	sigaddset(&set, SIGHUP);
+	pthread_sigmask(SIG_BLOCK, &set, nullptr);
+	std::signal(SIGPIPE, SIG_IGN);
+	return set;
+}
+
+/// Waits up to `seconds` for one of `set`; returns the signal or 0 on timeout.
+int wait_signal(const sigset_t &set, double seconds)
+{
+	timespec timeout{static_cast<time_t>(seconds),
+			 static_cast<long>((seconds - static_cast<double>(static_cast<time_t>(seconds))) * 1e9)};
+	const int sig = sigtimedwait(&set, nullptr, &timeout);
+	return sig > 0 ? sig : 0;
+}
+
+OverflowPolicy policy_for(const std::string &overflow, bool live)
+{
+	if (overflow == "drop-oldest")
+		return OverflowPolicy::DropOldest;
+	if (overflow == "block")
+		return OverflowPolicy::Block;
+	return live ? OverflowPolicy::DropOldest : OverflowPolicy::Block;
+}
+
+PipelineOptions pipeline_options(const DaemonConfig &config, bool live)
+{
+	PipelineOptions options;
+	options.workers =
+		config.pipeline.workers > 0 ? static_cast<size_t>(config.pipeline.workers) : default_workers();
+	options.ring_capacity = static_cast<size_t>(config.pipeline.ring_capacity);
+	options.overflow = policy_for(config.pipeline.overflow, live);
+	options.motion = config.motion;
+	return options;
+}
+
+protocol::StatusReport make_status(const Pipeline &pipeline, const SocketServerStats *server, int64_t start_ns,
+				   double capture_fps, double publish_fps)
+{
+	const PipelineStats s = pipeline.stats();
+	protocol::StatusReport report;
+	report.t_host_ns = monotonic_ns();
+	report.uptime_s = static_cast<double>(report.t_host_ns - start_ns) * 1e-9;
+	report.source = pipeline.source_info().name;
+	report.source_state = s.source_state;
+	report.capture_fps = capture_fps;
+	report.publish_fps = publish_fps;
+	report.frames_captured = s.frames_captured;
+	report.frames_published = s.frames_published;
+	report.drops = {{"ring_overflow", s.ring_evicted},
+			{"pool_exhausted", s.pool_exhausted},
+			{"source_gap", s.source_gaps},
+			{"corrupt", s.corrupt},
+			{"processing_error", s.processing_errors}};
+	if (server) {
+		report.drops["client_queue"] = server->messages_dropped;
+		report.drops["clients_dropped"] = server->clients_dropped;
+		report.clients = server->clients;
+	}
+	report.capture_to_publish = s.capture_to_publish;
+	return report;
+}
+
+/// Frames per second from counter deltas between two status ticks.
+class RateMeter
+{
+public:
+	std::pair<double, double> update(uint64_t captured, uint64_t published)
+	{
+		const int64_t now = monotonic_ns();
+		const double dt = static_cast<double>(now - last_ns_) * 1e-9;
+		std::pair<double, double> rates{0, 0};
+		if (last_ns_ != 0 && dt > 0)
+			rates = {static_cast<double>(captured - last_captured_) / dt,
+				 static_cast<double>(published - last_published_) / dt};
+		last_ns_ = now;
+		last_captured_ = captured;
+		last_published_ = published;
+		return rates;
+	}
+
+private:
+	int64_t last_ns_ = 0;
+	uint64_t last_captured_ = 0, last_published_ = 0;
+};
+
+void set_log_level(const std::string &level)
+{
+	spdlog::set_level(spdlog::level::from_str(level));
+}
+
+} // namespace
+
+size_t default_workers()
+{
+	const unsigned cores = std::thread::hardware_concurrency();
+	return cores > 0 ? cores : 2;
+}
+
+std::string driver_for_format(const std::string &format, const std::string &path)
+{
+	if (format == "recording" || format == "replay" || format == "srec")
+		return "replay";
+	if (format == "video" || format == "kitti" || format == "euroc" || format == "tum" || format == "folder" ||
+	    format == "sim")
+		return format;
+	if (format != "auto")
+		throw ConfigError("--format " + format +
+				  ": unknown (known: auto, recording, video, kitti, euroc, tum, folder, sim)");
+	const fs::path p(path);
+	std::error_code ec;
+	if (fs::is_directory(p, ec)) {
+		if (fs::exists(p / "image_02", ec))
+			return "kitti";
+		if (fs::exists(p / "mav0", ec))
+			return "euroc";
+		if (fs::exists(p / "rgb.txt", ec))
+			return "tum";
+		if (fs::exists(p / "left", ec))
+			return "folder";
+		throw ConfigError("--input " + path + ": cannot tell the dataset layout; give --format");
+	}
+	if (p.extension() == ".srec")
+		return "replay";
+	return "video";
+}
+
+int run_daemon(const DaemonConfig &config)
+{
+	set_log_level(config.log.level);
+	const sigset_t signals = block_signals();
+	const auto registry = drivers::SourceRegistry::with_builtin_drivers();
+	auto source = registry.create(config.source);
+	const drivers::SourceInfo info = source->info();
+	spdlog::info("source: {} ({}x{} {}, {}{} fps {})", info.description, info.geometry.width, info.geometry.height,
+		     to_string(info.geometry.format), info.geometry.stereo ? "stereo, " : "",
+		     info.geometry.depth ? "depth, " : "", info.geometry.nominal_fps);
+
+	SocketServer server({config.output.socket, config.output.socket_mode,
+			     static_cast<size_t>(config.output.client_queue),
+			     static_cast<size_t>(config.output.client_max_input)});
+	server.set_greeting(
+		protocol::hello_message(monotonic_ns(), info.name, info.geometry.width, info.geometry.height));
+	const PipelineOptions options = pipeline_options(config, info.live);
+	Pipeline pipeline(std::move(source), options,
+			  [&server](FrameResult &result) { server.publish(protocol::frame_message(result)); });
+	pipeline.start();
+	spdlog::info("streaming on {} ({} workers, ring {} {})", config.output.socket, options.workers,
+		     options.ring_capacity, to_string(options.overflow));
+	sd_notifyf(0, "READY=1\nSTATUS=streaming %s on %s", info.name.c_str(), config.output.socket.c_str());
+
+	uint64_t watchdog_usec = 0;
+	const bool watchdog = sd_watchdog_enabled(0, &watchdog_usec) > 0;
+	double tick_s = config.output.status_interval_s;
+	if (watchdog)
+		tick_s = std::min(tick_s, static_cast<double>(watchdog_usec) * 1e-6 / 2);
+
+	const int64_t start_ns = monotonic_ns();
+	int64_t next_status_ns = start_ns + static_cast<int64_t>(config.output.status_interval_s * 1e9);
+	int64_t next_log_ns = start_ns + 10'000'000'000;
+	RateMeter meter;
+	auto emit_status = [&] {
+		const SocketServerStats server_stats = server.stats();
+		const PipelineStats s = pipeline.stats();
+		const auto [capture_fps, publish_fps] = meter.update(s.frames_captured, s.frames_published);
+		const auto report = make_status(pipeline, &server_stats, start_ns, capture_fps, publish_fps);
+		server.publish(protocol::status_message(report));
+		return report;
+	};
+	int exit_code = 0;
+	for (;;) {
+		const int sig = wait_signal(signals, tick_s);
+		if (sig == SIGTERM || sig == SIGINT) {
+			spdlog::info("{}: draining and stopping", sig == SIGTERM ? "SIGTERM" : "SIGINT");
+			sd_notify(0, "STOPPING=1");
+			pipeline.request_stop();
+			pipeline.wait();
+			break;
+		}
+		if (sig == SIGHUP)
+			spdlog::info("SIGHUP: configuration reload is not supported yet; ignored");
+		if (watchdog)
+			sd_notify(0, "WATCHDOG=1");
+		const int64_t now = monotonic_ns();
+		if (now >= next_status_ns) {
+			next_status_ns = now + static_cast<int64_t>(config.output.status_interval_s * 1e9);
+			const auto report = emit_status();
+			if (now >= next_log_ns) {
+				next_log_ns = now + 10'000'000'000;
+				spdlog::info("status: {:.1f} fps captured, {:.1f} published, latency p50 {:.1f} ms p99 "
+					     "{:.1f} ms, "
+					     "{} clients",
+					     report.capture_fps, report.publish_fps, report.capture_to_publish.p50_ms,
+					     report.capture_to_publish.p99_ms, report.clients);
+			}
+		}
+		if (pipeline.finished()) {
+			spdlog::info("source finished");
+			for (const auto &line : pipeline.source_report())
+				spdlog::info("{}", line);
+			break;
+		}
+	}
+	emit_status();
+	const auto final_stats = pipeline.stats();
+	spdlog::info("stopped: {} frames captured, {} published", final_stats.frames_captured,
+		     final_stats.frames_published);
+	return exit_code;
+}
+
+int run_batch(DaemonConfig config, const BatchOptions &options)
+{
+	set_log_level(config.log.level);
+	const sigset_t signals = block_signals();
+	config.source.realtime = false;
+	if (config.source.driver != "sim") {
+		std::error_code ec;
+		if (!fs::exists(config.source.path, ec))
+			throw ConfigError("--input " + config.source.path + ": no such file or directory");
+	}
+	const auto registry = drivers::SourceRegistry::with_builtin_drivers();
+	auto source = registry.create(config.source);
+	const drivers::SourceInfo info = source->info();
+
+	std::ofstream file;
+	std::ostream *out = &std::cout;
+	if (options.output != "-") {
+		file.open(options.output, std::ios::binary | std::ios::trunc);
+		if (!file)
+			throw ConfigError("--output " + options.output + ": cannot create file");
+		out = &file;
+	}
+
+	// Truth export: one mask PNG per frame and one truth.ndjson line per frame, sorted at the end.
+	const bool export_truth = !options.truth_dir.empty() && info.geometry.truth;
+	if (!options.truth_dir.empty() && !info.geometry.truth)
+		spdlog::warn("--truth-dir: source '{}' has no ground truth; nothing written there", info.name);
+	std::mutex truth_mutex;
+	std::map<uint64_t, std::string> truth_lines;
+	if (export_truth)
+		fs::create_directories(fs::path(options.truth_dir) / "masks");
+
+	PipelineOptions pipeline_opts = pipeline_options(config, false);
+	pipeline_opts.overflow = OverflowPolicy::Block; // batch never drops
+	Pipeline pipeline(std::move(source), pipeline_opts,
+			  [out](FrameResult &result) { *out << protocol::frame_message(result) << '\n'; });
+	if (export_truth) {
+		pipeline.set_frame_observer([&](const StereoFrame &frame) {
+			char name[32];
+			std::snprintf(name, sizeof(name), "masks/%06llu.png",
+				      static_cast<unsigned long long>(frame.sequence));
+			cv::imwrite((fs::path(options.truth_dir) / name).string(), frame.truth.object_ids);
+			nlohmann::json objects = nlohmann::json::array();
+			for (size_t i = 0; i < frame.truth.object_count; ++i) {
+				const auto &o = frame.truth.objects[i];
+				objects.push_back(
+					{{"id", o.id}, {"position_m", o.position_m}, {"velocity_mps", o.velocity_mps}});
+			}
+			const nlohmann::json line = {{"seq", frame.sequence},
+						     {"t_capture_ns", frame.device_ns},
+						     {"camera_pose", frame.truth.camera_pose},
+						     {"objects", std::move(objects)},
+						     {"mask", name}};
+			std::lock_guard lock(truth_mutex);
+			truth_lines[frame.sequence] = line.dump();
+		});
+	}
+
+	const bool show_progress = options.progress && ::isatty(STDERR_FILENO);
+	const int64_t start_ns = monotonic_ns();
+	pipeline.start();
+	bool interrupted = false;
+	while (!pipeline.finished()) {
+		const int sig = wait_signal(signals, 0.1);
+		if ((sig == SIGINT || sig == SIGTERM) && !interrupted) {
+			interrupted = true;
+			spdlog::warn("interrupted: finishing the frames already read");
+			pipeline.request_stop();
+		}
+		if (show_progress) {
+			const auto s = pipeline.stats();
+			const uint64_t total = info.frame_count;
+			const double elapsed = static_cast<double>(monotonic_ns() - start_ns) * 1e-9;
+			const double fps = elapsed > 0 ? static_cast<double>(s.frames_published) / elapsed : 0;
+			std::string bar;
+			if (total > 0) {
+				const auto filled = static_cast<size_t>(30.0 * static_cast<double>(s.frames_published) /
+									static_cast<double>(total));
+				bar = "[" + std::string(std::min<size_t>(filled, 30), '#') +
+				      std::string(30 - std::min<size_t>(filled, 30), ' ') + "] ";
+			}
+			std::fprintf(stderr, "\r%s%llu%s frames  %.1f fps ", bar.c_str(),
+				     static_cast<unsigned long long>(s.frames_published),
+				     total > 0 ? ("/" + std::to_string(total)).c_str() : "", fps);
+		}
+	}
+	pipeline.wait();
+	if (show_progress)
+		std::fprintf(stderr, "\n");
+	out->flush();
+	if (export_truth) {
+		std::ofstream truth(fs::path(options.truth_dir) / "truth.ndjson", std::ios::trunc);
+		for (const auto &[seq, line] : truth_lines)
+			truth << line << '\n';
+	}
+	const auto s = pipeline.stats();
+	const double elapsed = static_cast<double>(monotonic_ns() - start_ns) * 1e-9;
+	spdlog::info("processed {} frames in {:.2f} s ({:.1f} fps); {} corrupt, {} processing errors",
+		     s.frames_published, elapsed, elapsed > 0 ? static_cast<double>(s.frames_published) / elapsed : 0.0,
+		     s.corrupt, s.processing_errors);
+	for (const auto &line : pipeline.source_report())
+		spdlog::info("{}", line);
+	if (!*out)
+		throw ConfigError("--output " + options.output + ": write failed");
+	return interrupted ? 130 : 0;
+}
+
+} // namespace stereod::daemon

@@ -1,0 +1,29 @@
+#pragma once
+// The two ways to run the pipeline: as the daemon (a live source, the socket, status messages, signals,
+// systemd notification) and as a batch job (a file source, as fast as possible, NDJSON to a file).
+#include <string>
+
+#include "daemon/config.hpp"
+
+namespace stereod::daemon
+{
+
+/// Runs until SIGTERM/SIGINT (drains, returns 0) or until a finite source ends.
+int run_daemon(const DaemonConfig &config);
+
+struct BatchOptions {
+	std::string output;    ///< NDJSON file, "-" for standard output
+	std::string truth_dir; ///< when set and the source knows the truth: masks and truth.ndjson go here
+	bool progress = true;  ///< a progress bar when standard error is a terminal
+};
+
+/// Processes every frame of config.source with blocking hand-off (nothing dropped). Returns 0 on success.
+int run_batch(DaemonConfig config, const BatchOptions &options);
+
+/// Maps a --format name (or "auto", guessing from the path) to a driver name. Throws ConfigError.
+std::string driver_for_format(const std::string &format, const std::string &path);
+
+/// Workers to use when the config says 0.
+size_t default_workers();
+
+} // namespace stereod::daemon

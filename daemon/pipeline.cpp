@@ -1,0 +1,264 @@
+#include "daemon/pipeline.hpp"
+
+#include <chrono>
+
+#include <spdlog/spdlog.h>
+
+#include "core/clock.hpp"
+
+namespace stereod::daemon
+{
+
+Pipeline::Pipeline(std::unique_ptr<drivers::FrameSource> source, PipelineOptions options, Sink sink)
+	: source_(std::move(source)), options_(std::move(options)), sink_(std::move(sink)),
+	  source_name_(source_->info().name),
+	  // Enough frames for a full ring, a full job queue, one per worker and the one being captured.
+	  pool_(options_.ring_capacity + 2 * options_.workers + options_.workers + 2, source_->info().geometry),
+	  ring_(options_.ring_capacity, options_.overflow), jobs_capacity_(2 * options_.workers)
+{
+	if (options_.workers == 0)
+		throw std::invalid_argument("pipeline needs at least one worker");
+	spare_.allocate(source_->info().geometry);
+}
+
+Pipeline::~Pipeline()
+{
+	request_stop();
+	wait();
+}
+
+void Pipeline::start()
+{
+	publish_thread_ = std::thread([this] { publish_loop(); });
+	for (size_t i = 0; i < options_.workers; ++i)
+		workers_.emplace_back([this] { worker_loop(); });
+	dispatch_thread_ = std::thread([this] { dispatch_loop(); });
+	capture_thread_ = std::thread([this] { capture_loop(); });
+}
+
+void Pipeline::request_stop()
+{
+	stop_.store(true);
+	pool_.wake_waiters();
+	ring_.close();
+}
+
+void Pipeline::wait()
+{
+	for (std::thread *t : {&capture_thread_, &dispatch_thread_})
+		if (t->joinable())
+			t->join();
+	for (auto &worker : workers_)
+		if (worker.joinable())
+			worker.join();
+	if (publish_thread_.joinable())
+		publish_thread_.join();
+}
+
+void Pipeline::set_state(const char *state)
+{
+	std::lock_guard lock(state_mutex_);
+	state_ = state;
+}
+
+PipelineStats Pipeline::stats() const
+{
+	PipelineStats s;
+	{
+		std::lock_guard lock(state_mutex_);
+		s.source_state = state_;
+		s.capture_to_publish = latency_.summary();
+	}
+	s.frames_captured = captured_.load();
+	s.frames_published = published_.load();
+	s.ring_evicted = ring_.counters().evicted;
+	s.pool_exhausted = pool_exhausted_.load();
+	s.source_gaps = source_gaps_.load();
+	s.corrupt = corrupt_.load();
+	s.processing_errors = processing_errors_.load();
+	s.reconnects = reconnects_.load();
+	return s;
+}
+
+void Pipeline::capture_loop()
+{
+	const bool live = source_->info().live;
+	bool have_last = false;
+	uint64_t last_sequence = 0;
+	set_state("streaming");
+	auto backoff = std::chrono::milliseconds(100);
+	while (!stop_.load()) {
+		std::optional<FrameHandle> frame =
+			live ? pool_.try_acquire() : pool_.acquire_waiting([this] { return stop_.load(); });
+		if (!frame && !live)
+			break; // stopping
+		StereoFrame &target = frame ? **frame : spare_;
+		drivers::GrabStatus status{};
+		try {
+			status = source_->grab(target);
+		} catch (const std::exception &e) {
+			spdlog::error("capture: {}: {}", source_name_, e.what());
+			status = drivers::GrabStatus::Lost;
+		}
+		if (status == drivers::GrabStatus::EndOfStream)
+			break;
+		if (status == drivers::GrabStatus::Timeout)
+			continue;
+		if (status == drivers::GrabStatus::Lost) {
+			set_state("reconnecting");
+			while (!stop_.load()) {
+				std::this_thread::sleep_for(backoff);
+				backoff = std::min(backoff * 2, std::chrono::milliseconds(2000));
+				if (source_->reconnect()) {
+					reconnects_.fetch_add(1);
+					spdlog::info("capture: {} reconnected", source_name_);
+					break;
+				}
+			}
+			backoff = std::chrono::milliseconds(100);
+			set_state("streaming");
+			continue;
+		}
+
+		captured_.fetch_add(1);
+		if (have_last && target.sequence > last_sequence + 1)
+			source_gaps_.fetch_add(target.sequence - last_sequence - 1);
+		have_last = true;
+		last_sequence = target.sequence;
+		if (target.status == FrameStatus::Corrupt)
+			corrupt_.fetch_add(1);
+		if (!frame) {
+			pool_exhausted_.fetch_add(1);
+			continue;
+		}
+		uint32_t evicted = 0;
+		const uint32_t index = frame->release();
+		const auto pushed = ring_.push(index, evicted);
+		if (pushed == SpscRing<uint32_t>::PushResult::PushedEvicted) {
+			pool_.adopt(evicted).reset(); // back to the pool; the ring counts it
+		} else if (pushed == SpscRing<uint32_t>::PushResult::Closed) {
+			pool_.adopt(index).reset();
+			break;
+		}
+	}
+	set_state(stop_.load() ? "stopped" : "finished");
+	ring_.close();
+}
+
+void Pipeline::dispatch_loop()
+{
+	std::shared_future<FeaturesPtr> previous;
+	uint64_t order = 0;
+	while (auto index = ring_.pop()) {
+		auto job = std::make_unique<Job>();
+		job->order = order++;
+		job->frame = pool_.adopt(*index);
+		job->previous = previous;
+		job->provides_features = job->frame->status != FrameStatus::Corrupt;
+		if (job->provides_features)
+			previous = job->features.get_future().share();
+		std::unique_lock lock(jobs_mutex_);
+		jobs_changed_.wait(lock, [this] { return jobs_.size() < jobs_capacity_; });
+		jobs_.push_back(std::move(job));
+		jobs_changed_.notify_all();
+	}
+	{
+		std::lock_guard lock(jobs_mutex_);
+		jobs_closed_ = true;
+	}
+	jobs_changed_.notify_all();
+	{
+		std::lock_guard lock(results_mutex_);
+		dispatched_ = order;
+		dispatch_done_ = true;
+	}
+	results_changed_.notify_all();
+}
+
+void Pipeline::worker_loop()
+{
+	for (;;) {
+		std::unique_ptr<Job> job;
+		{
+			std::unique_lock lock(jobs_mutex_);
+			jobs_changed_.wait(lock, [this] { return !jobs_.empty() || jobs_closed_; });
+			if (jobs_.empty())
+				return;
+			job = std::move(jobs_.front());
+			jobs_.pop_front();
+		}
+		jobs_changed_.notify_all();
+		process(*job);
+	}
+}
+
+void Pipeline::process(Job &job)
+{
+	const StereoFrame &frame = *job.frame;
+	FrameResult result;
+	result.seq = frame.sequence;
+	result.t_capture_ns = frame.device_ns;
+	result.t_host_ns = frame.host_ns;
+	result.lr_skew_ns = frame.lr_skew_ns;
+	result.source = source_name_;
+	result.status = frame.status;
+	result.width = frame.left.cols;
+	result.height = frame.left.rows;
+
+	bool promised = false;
+	try {
+		if (job.provides_features && options_.motion.enabled) {
+			auto features = std::make_shared<const vision::FrameFeatures>(
+				vision::extract_stage(frame, options_.motion, result.timing));
+			job.features.set_value(features);
+			promised = true;
+			// Waits only for an earlier frame that another worker already holds: no deadlock.
+			const FeaturesPtr previous = job.previous.valid() ? job.previous.get() : nullptr;
+			vision::pair_stage(previous.get(), *features, frame, options_.motion, result);
+		}
+	} catch (const std::exception &e) {
+		processing_errors_.fetch_add(1);
+		spdlog::error("processing frame {}: {}", frame.sequence, e.what());
+		result.points.clear();
+		result.ego.reset();
+	}
+	if (job.provides_features && !promised)
+		job.features.set_value(nullptr); // the next frame pairs with nothing rather than waiting forever
+	if (observer_)
+		observer_(frame);
+	job.frame.reset(); // back to the pool before publishing
+
+	{
+		std::lock_guard lock(results_mutex_);
+		results_.emplace(job.order, std::move(result));
+	}
+	results_changed_.notify_all();
+}
+
+void Pipeline::publish_loop()
+{
+	uint64_t next = 0;
+	for (;;) {
+		FrameResult result;
+		{
+			std::unique_lock lock(results_mutex_);
+			results_changed_.wait(lock, [&] {
+				return results_.count(next) > 0 || (dispatch_done_ && next >= dispatched_);
+			});
+			auto it = results_.find(next);
+			if (it == results_.end())
+				break; // everything dispatched has been published
+			result = std::move(it->second);
+			results_.erase(it);
+		}
+		++next;
+		result.t_publish_ns = monotonic_ns();
+		sink_(result);
+		published_.fetch_add(1);
+		std::lock_guard lock(state_mutex_);
+		latency_.add(result.t_publish_ns - result.t_host_ns);
+	}
+	finished_.store(true);
+}
+
+} // namespace stereod::daemon

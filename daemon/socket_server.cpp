@@ -1,0 +1,276 @@
+#include "daemon/socket_server.hpp"
+
+#include <cerrno>
+#include <cstring>
+#include <fcntl.h>
+#include <filesystem>
+#include <stdexcept>
+#include <sys/epoll.h>
+#include <sys/eventfd.h>
+#include <sys/socket.h>
+#include <sys/stat.h>
+#include <sys/un.h>
+#include <unistd.h>
+
+#include <spdlog/spdlog.h>
+
+#include "core/clock.hpp"
+#include "core/protocol.hpp"
+
+namespace stereod::daemon
+{
+namespace
+{
+
+sockaddr_un address_of(const std::string &path)
+{
+	sockaddr_un addr{};
+	addr.sun_family = AF_UNIX;
+	if (path.empty() || path.size() >= sizeof(addr.sun_path))
+		throw std::runtime_error("socket path '" + path + "' is empty or longer than " +
+					 std::to_string(sizeof(addr.sun_path) - 1) + " bytes");
+	std::memcpy(addr.sun_path, path.c_str(), path.size() + 1);
+	return addr;
+}
+
+/// True when something accepts connections at `path` (so it is not ours to remove).
+bool someone_listens(const std::string &path)
+{
+	const int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+	if (fd < 0)
+		return false;
+	const sockaddr_un addr = address_of(path);
+	const bool listening = ::connect(fd, reinterpret_cast<const sockaddr *>(&addr), sizeof(addr)) == 0;
+	::close(fd);
+	return listening;
+}
+
+} // namespace
+
+SocketServer::SocketServer(SocketServerOptions options) : options_(std::move(options))
+{
+	const sockaddr_un addr = address_of(options_.path);
+	std::error_code ec;
+	const auto parent = std::filesystem::path(options_.path).parent_path();
+	if (!parent.empty())
+		std::filesystem::create_directories(parent, ec);
+	struct stat st {
+	};
+	if (::lstat(options_.path.c_str(), &st) == 0) {
+		if (!S_ISSOCK(st.st_mode))
+			throw std::runtime_error(options_.path +
+						 ": exists and is not a socket; refusing to replace it");
+		if (someone_listens(options_.path))
+			throw std::runtime_error(options_.path + ": another process is already listening there");
+		::unlink(options_.path.c_str()); // stale, left by a daemon that died
+	}
+	listen_fd_ = ::socket(AF_UNIX, SOCK_STREAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
+	if (listen_fd_ < 0)
+		throw std::runtime_error(std::string("socket(): ") + std::strerror(errno));
+	if (::bind(listen_fd_, reinterpret_cast<const sockaddr *>(&addr), sizeof(addr)) != 0) {
+		const int err = errno;
+		::close(listen_fd_);
+		throw std::runtime_error(options_.path + ": cannot bind: " + std::strerror(err));
+	}
+	// chmod after bind: the mode must not depend on the process umask.
+	::chmod(options_.path.c_str(), static_cast<mode_t>(options_.mode));
+	if (::listen(listen_fd_, 64) != 0) {
+		const int err = errno;
+		::close(listen_fd_);
+		::unlink(options_.path.c_str());
+		throw std::runtime_error(options_.path + ": cannot listen: " + std::strerror(err));
+	}
+	epoll_fd_ = ::epoll_create1(EPOLL_CLOEXEC);
+	wake_fd_ = ::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
+	epoll_event ev{};
+	ev.events = EPOLLIN;
+	ev.data.fd = listen_fd_;
+	::epoll_ctl(epoll_fd_, EPOLL_CTL_ADD, listen_fd_, &ev);
+	ev.data.fd = wake_fd_;
+	::epoll_ctl(epoll_fd_, EPOLL_CTL_ADD, wake_fd_, &ev);
+	thread_ = std::thread([this] { run(); });
+}
+
+SocketServer::~SocketServer()
+{
+	stop_.store(true);
+	const uint64_t one = 1;
+	(void)!::write(wake_fd_, &one, sizeof(one));
+	if (thread_.joinable())
+		thread_.join();
+	for (auto &[fd, client] : clients_) {
+		// Best effort: hand each client what is still queued before closing.
+		flush(fd, client);
+		::close(fd);
+	}
+	::close(listen_fd_);
+	::unlink(options_.path.c_str());
+	::close(epoll_fd_);
+	::close(wake_fd_);
+}
+
+void SocketServer::set_greeting(std::string line)
+{
+	line.push_back('\n');
+	std::lock_guard lock(mutex_);
+	greeting_ = std::make_shared<const std::string>(std::move(line));
+}
+
+void SocketServer::publish(std::string line)
+{
+	line.push_back('\n');
+	auto message = std::make_shared<const std::string>(std::move(line));
+	{
+		std::lock_guard lock(mutex_);
+		for (auto &[fd, client] : clients_) {
+			if (client.queue.size() >= options_.client_queue) {
+				// Drop the oldest message not yet begun: a half-sent line must be finished.
+				const auto victim = client.offset > 0 ? client.queue.begin() + 1 : client.queue.begin();
+				if (victim != client.queue.end()) {
+					client.queue.erase(victim);
+					++client.dropped_total;
+					++client.dropped_unreported;
+					++stats_.messages_dropped;
+				}
+			}
+			client.queue.push_back(message);
+		}
+	}
+	const uint64_t one = 1;
+	(void)!::write(wake_fd_, &one, sizeof(one));
+}
+
+SocketServerStats SocketServer::stats() const
+{
+	std::lock_guard lock(mutex_);
+	SocketServerStats s = stats_;
+	s.clients = clients_.size();
+	return s;
+}
+
+void SocketServer::run()
+{
+	std::array<epoll_event, 32> events{};
+	while (!stop_.load()) {
+		const int n = ::epoll_wait(epoll_fd_, events.data(), static_cast<int>(events.size()), 500);
+		if (n < 0 && errno != EINTR) {
+			spdlog::error("socket server: epoll_wait: {}", std::strerror(errno));
+			break;
+		}
+		std::lock_guard lock(mutex_);
+		for (int i = 0; i < n; ++i) {
+			const int fd = events[static_cast<size_t>(i)].data.fd;
+			const uint32_t what = events[static_cast<size_t>(i)].events;
+			if (fd == listen_fd_) {
+				accept_clients();
+			} else if (fd == wake_fd_) {
+				uint64_t count = 0;
+				(void)!::read(wake_fd_, &count, sizeof(count));
+			} else if (auto it = clients_.find(fd); it != clients_.end()) {
+				if (what & EPOLLIN) {
+					char sink[1024];
+					ssize_t got = 0;
+					bool closed = false;
+					while ((got = ::recv(fd, sink, sizeof(sink), MSG_DONTWAIT)) > 0)
+						it->second.input_bytes += static_cast<size_t>(got);
+					if (got == 0)
+						closed = true;
+					if (it->second.input_bytes > options_.client_max_input) {
+						spdlog::warn("socket: client {} sent {} bytes (limit {}); dropped", fd,
+							     it->second.input_bytes, options_.client_max_input);
+						close_client(fd, true);
+						continue;
+					}
+					if (closed) {
+						// The client shut down its sending side (e.g. socat with stdin at
+						// EOF); it may still read, so keep it and stop listening for input.
+						it->second.input_closed = true;
+						update_interest(fd, it->second, true);
+					}
+				}
+				if (what & (EPOLLHUP | EPOLLERR)) {
+					close_client(fd, false);
+					continue;
+				}
+			}
+		}
+		// Write whatever is queued; clients that would block wait for EPOLLOUT.
+		for (auto it = clients_.begin(); it != clients_.end();) {
+			const int fd = it->first;
+			++it; // flush may close (and erase) this client
+			if (auto c = clients_.find(fd); c != clients_.end())
+				flush(fd, c->second);
+		}
+	}
+}
+
+void SocketServer::accept_clients()
+{
+	for (;;) {
+		const int fd = ::accept4(listen_fd_, nullptr, nullptr, SOCK_NONBLOCK | SOCK_CLOEXEC);
+		if (fd < 0)
+			return;
+		Client &client = clients_[fd];
+		if (greeting_)
+			client.queue.push_back(greeting_);
+		epoll_event ev{};
+		ev.events = EPOLLIN | EPOLLRDHUP;
+		ev.data.fd = fd;
+		::epoll_ctl(epoll_fd_, EPOLL_CTL_ADD, fd, &ev);
+		++stats_.accepted;
+		spdlog::info("socket: client {} connected ({} now)", fd, clients_.size());
+	}
+}
+
+void SocketServer::flush(int fd, Client &client)
+{
+	while (!client.queue.empty()) {
+		if (client.offset == 0 && client.dropped_unreported > 0) {
+			client.queue.push_front(std::make_shared<const std::string>(
+				protocol::lag_message(monotonic_ns(), client.dropped_total, client.dropped_unreported) +
+				"\n"));
+			client.dropped_unreported = 0;
+		}
+		const std::string &front = *client.queue.front();
+		const ssize_t sent = ::send(fd, front.data() + client.offset, front.size() - client.offset,
+					    MSG_DONTWAIT | MSG_NOSIGNAL);
+		if (sent < 0) {
+			if (errno == EAGAIN || errno == EWOULDBLOCK)
+				break;
+			close_client(fd, false);
+			return;
+		}
+		client.offset += static_cast<size_t>(sent);
+		if (client.offset == front.size()) {
+			client.queue.pop_front();
+			client.offset = 0;
+		}
+	}
+	update_interest(fd, client, false);
+}
+
+void SocketServer::update_interest(int fd, Client &client, bool force)
+{
+	const bool want = !client.queue.empty();
+	if (want == client.writable_wait && !force)
+		return;
+	epoll_event ev{};
+	ev.events = (client.input_closed ? 0U : EPOLLIN | EPOLLRDHUP) | (want ? EPOLLOUT : 0U);
+	ev.data.fd = fd;
+	::epoll_ctl(epoll_fd_, EPOLL_CTL_MOD, fd, &ev);
+	client.writable_wait = want;
+}
+
+void SocketServer::close_client(int fd, bool misbehaved)
+{
+	::epoll_ctl(epoll_fd_, EPOLL_CTL_DEL, fd, nullptr);
+	::close(fd);
+	clients_.erase(fd);
+	if (misbehaved)
+		++stats_.clients_dropped;
+	else
+		++stats_.clients_closed;
+	spdlog::info("socket: client {} {} ({} left)", fd, misbehaved ? "dropped" : "disconnected", clients_.size());
+}
+
+} // namespace stereod::daemon

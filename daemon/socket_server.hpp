@@ -1,0 +1,78 @@
+#pragma once
+// The results socket: a Unix-domain stream socket that streams newline-delimited JSON to any number of
+// clients. publish() never waits for a client: each client has a bounded queue, and a client too slow to
+// keep up loses its oldest messages (counted, and told with a `lag` message). A client that sends more
+// than it may is dropped and counted.
+#include <atomic>
+#include <cstdint>
+#include <deque>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+
+namespace stereod::daemon
+{
+
+struct SocketServerOptions {
+	std::string path;
+	int mode = 0660;
+	size_t client_queue = 256;
+	size_t client_max_input = 4096;
+};
+
+struct SocketServerStats {
+	size_t clients = 0;
+	uint64_t accepted = 0;
+	uint64_t messages_dropped = 0; ///< messages discarded from slow clients' queues
+	uint64_t clients_dropped = 0;  ///< clients disconnected for misbehaving
+	uint64_t clients_closed = 0;   ///< clients that hung up
+};
+
+class SocketServer
+{
+public:
+	/// Binds and listens; throws std::runtime_error naming the path when that fails (e.g. another
+	/// stereod already listens there). A stale socket file from a dead daemon is replaced.
+	explicit SocketServer(SocketServerOptions options);
+	~SocketServer();
+	SocketServer(const SocketServer &) = delete;
+	SocketServer &operator=(const SocketServer &) = delete;
+
+	/// Sent first to every new client.
+	void set_greeting(std::string line);
+	/// Queues one line (without its newline) for every connected client. Thread-safe, never blocks on I/O.
+	void publish(std::string line);
+	[[nodiscard]] SocketServerStats stats() const;
+
+private:
+	struct Client {
+		std::deque<std::shared_ptr<const std::string>> queue;
+		size_t offset = 0; ///< bytes of queue.front() already sent
+		uint64_t dropped_total = 0;
+		uint64_t dropped_unreported = 0;
+		size_t input_bytes = 0;
+		bool writable_wait = false; ///< registered for EPOLLOUT
+		bool input_closed = false;  ///< the client shut down its sending side
+	};
+
+	void run();
+	void accept_clients();
+	void flush(int fd, Client &client); ///< called with mutex_ held
+	void close_client(int fd, bool misbehaved);
+	void update_interest(int fd, Client &client, bool force);
+
+	SocketServerOptions options_;
+	int listen_fd_ = -1;
+	int epoll_fd_ = -1;
+	int wake_fd_ = -1;
+	std::atomic<bool> stop_{false};
+	mutable std::mutex mutex_;
+	std::map<int, Client> clients_;
+	std::shared_ptr<const std::string> greeting_;
+	SocketServerStats stats_;
+	std::thread thread_;
+};
+
+} // namespace stereod::daemon

@@ -1,0 +1,318 @@
+#include "drivers/replay/recording.hpp"
+
+#include <cerrno>
+#include <cstring>
+#include <fcntl.h>
+#include <stdexcept>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <nlohmann/json.hpp>
+#include <zlib.h>
+
+namespace stereod::drivers
+{
+namespace
+{
+
+constexpr char kMagic[8] = {'S', 'R', 'E', 'C', '\r', '\n', '\x1a', '\n'};
+constexpr uint32_t kVersion = 1;
+constexpr uint32_t kRecordMagic = 0x4d524653; // "SFRM" little-endian
+constexpr size_t kRecordHeaderSize = 12;      // magic, payload length, payload CRC
+constexpr uint32_t kMaxPayload = 1U << 30;
+
+enum class ImageRole : uint8_t { Left = 0, Right = 1, Depth = 2, ObjectIds = 3 };
+
+uint32_t crc32_of(const uint8_t *data, size_t size)
+{
+	return static_cast<uint32_t>(crc32(0L, data, static_cast<uInt>(size)));
+}
+
+template <typename T>
+void put(std::vector<uint8_t> &out, const T &value)
+{
+	const auto *bytes = reinterpret_cast<const uint8_t *>(&value);
+	out.insert(out.end(), bytes, bytes + sizeof(T));
+}
+
+template <typename T>
+T get(const uint8_t *&cursor, const uint8_t *end)
+{
+	if (static_cast<size_t>(end - cursor) < sizeof(T))
+		throw std::runtime_error("record shorter than its fields");
+	T value;
+	std::memcpy(&value, cursor, sizeof(T));
+	cursor += sizeof(T);
+	return value;
+}
+
+void put_image(std::vector<uint8_t> &out, ImageRole role, const cv::Mat &image)
+{
+	put<uint8_t>(out, static_cast<uint8_t>(role));
+	put<uint8_t>(out, 0);
+	put<uint16_t>(out, static_cast<uint16_t>(image.type()));
+	put<uint32_t>(out, static_cast<uint32_t>(image.rows));
+	put<uint32_t>(out, static_cast<uint32_t>(image.cols));
+	const size_t row_bytes = static_cast<size_t>(image.cols) * image.elemSize();
+	for (int y = 0; y < image.rows; ++y)
+		out.insert(out.end(), image.ptr<uint8_t>(y), image.ptr<uint8_t>(y) + row_bytes);
+}
+
+nlohmann::json header_json(const RecordingHeader &h)
+{
+	return {{"source", h.source},
+		{"description", h.description},
+		{"width", h.geometry.width},
+		{"height", h.geometry.height},
+		{"format", to_string(h.geometry.format)},
+		{"stereo", h.geometry.stereo},
+		{"depth", h.geometry.depth},
+		{"truth", h.geometry.truth},
+		{"nominal_fps", h.geometry.nominal_fps},
+		{"created_unix_ns", h.created_unix_ns}};
+}
+
+} // namespace
+
+RecordingWriter::RecordingWriter(const std::string &path, const RecordingHeader &header)
+	: path_(path), geometry_(header.geometry)
+{
+	fd_ = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_APPEND | O_CLOEXEC, 0644);
+	if (fd_ < 0)
+		throw std::runtime_error(path + ": cannot create recording: " + std::strerror(errno));
+	const std::string json = header_json(header).dump();
+	std::vector<uint8_t> head(kMagic, kMagic + sizeof(kMagic));
+	put<uint32_t>(head, kVersion);
+	put<uint32_t>(head, static_cast<uint32_t>(json.size()));
+	head.insert(head.end(), json.begin(), json.end());
+	put<uint32_t>(head, crc32_of(reinterpret_cast<const uint8_t *>(json.data()), json.size()));
+	write_all(head.data(), head.size());
+	::fdatasync(fd_);
+}
+
+RecordingWriter::~RecordingWriter()
+{
+	if (fd_ >= 0) {
+		::fdatasync(fd_);
+		::close(fd_);
+	}
+}
+
+void RecordingWriter::write_all(const uint8_t *data, size_t size)
+{
+	while (size > 0) {
+		const ssize_t n = ::write(fd_, data, size);
+		if (n < 0) {
+			if (errno == EINTR)
+				continue;
+			throw std::runtime_error(path_ + ": write failed: " + std::strerror(errno));
+		}
+		data += n;
+		size -= static_cast<size_t>(n);
+		bytes_ += static_cast<uint64_t>(n);
+	}
+}
+
+void RecordingWriter::append(const StereoFrame &frame, bool sync)
+{
+	buffer_.clear();
+	buffer_.resize(kRecordHeaderSize); // filled in below, once the payload is known
+	put<uint64_t>(buffer_, frame.sequence);
+	put<int64_t>(buffer_, frame.device_ns);
+	put<int64_t>(buffer_, frame.host_ns);
+	put<int64_t>(buffer_, frame.lr_skew_ns);
+	put<uint8_t>(buffer_, static_cast<uint8_t>(frame.status));
+	const uint8_t images = static_cast<uint8_t>(1 + (geometry_.stereo ? 1 : 0) + (geometry_.depth ? 1 : 0) +
+						    (geometry_.truth ? 1 : 0));
+	put<uint8_t>(buffer_, images);
+	put<uint16_t>(buffer_, 0);
+	if (geometry_.truth) {
+		for (double value : frame.truth.camera_pose)
+			put<double>(buffer_, value);
+		put<uint32_t>(buffer_, static_cast<uint32_t>(frame.truth.object_count));
+		for (size_t i = 0; i < frame.truth.object_count; ++i) {
+			const ObjectTruth &object = frame.truth.objects[i];
+			put<uint16_t>(buffer_, object.id);
+			for (double v : object.position_m)
+				put<double>(buffer_, v);
+			for (double v : object.velocity_mps)
+				put<double>(buffer_, v);
+		}
+	}
+	put_image(buffer_, ImageRole::Left, frame.left);
+	if (geometry_.stereo)
+		put_image(buffer_, ImageRole::Right, frame.right);
+	if (geometry_.depth)
+		put_image(buffer_, ImageRole::Depth, frame.depth);
+	if (geometry_.truth)
+		put_image(buffer_, ImageRole::ObjectIds, frame.truth.object_ids);
+
+	const size_t payload = buffer_.size() - kRecordHeaderSize;
+	const uint32_t header[3] = {kRecordMagic, static_cast<uint32_t>(payload),
+				    crc32_of(buffer_.data() + kRecordHeaderSize, payload)};
+	std::memcpy(buffer_.data(), header, sizeof(header));
+	write_all(buffer_.data(), buffer_.size());
+	if (sync)
+		::fdatasync(fd_);
+	++frames_;
+}
+
+std::string RecoveryReport::describe() const
+{
+	if (clean_end)
+		return std::to_string(frames) + " frames, clean end";
+	return std::to_string(frames) + " complete frames recovered; cut at byte " + std::to_string(cut_at_offset) +
+	       ": " + reason + " (" + std::to_string(bytes_dropped) + " bytes dropped)";
+}
+
+RecordingReader::RecordingReader(const std::string &path) : path_(path)
+{
+	file_ = std::fopen(path.c_str(), "rb");
+	if (!file_)
+		throw std::runtime_error(path + ": cannot open recording: " + std::strerror(errno));
+	struct stat st {
+	};
+	if (::fstat(::fileno(file_), &st) == 0)
+		file_size_ = static_cast<uint64_t>(st.st_size);
+
+	char magic[sizeof(kMagic)];
+	uint32_t fields[2];
+	if (std::fread(magic, 1, sizeof(magic), file_) != sizeof(magic) || std::memcmp(magic, kMagic, sizeof(kMagic)))
+		throw std::runtime_error(path + ": not a stereod recording (bad magic)");
+	if (std::fread(fields, sizeof(uint32_t), 2, file_) != 2)
+		throw std::runtime_error(path + ": recording header is cut short");
+	if (fields[0] != kVersion)
+		throw std::runtime_error(path + ": recording version " + std::to_string(fields[0]) +
+					 " is not supported (this build reads version " + std::to_string(kVersion) +
+					 ")");
+	if (fields[1] > (1U << 20))
+		throw std::runtime_error(path + ": recording header is implausibly large");
+	std::string json(fields[1], '\0');
+	uint32_t crc = 0;
+	if (std::fread(json.data(), 1, json.size(), file_) != json.size() || std::fread(&crc, 4, 1, file_) != 1)
+		throw std::runtime_error(path + ": recording header is cut short");
+	if (crc != crc32_of(reinterpret_cast<const uint8_t *>(json.data()), json.size()))
+		throw std::runtime_error(path + ": recording header fails its CRC");
+	try {
+		const auto j = nlohmann::json::parse(json);
+		header_.source = j.at("source").get<std::string>();
+		header_.description = j.value("description", "");
+		header_.geometry.width = j.at("width").get<int>();
+		header_.geometry.height = j.at("height").get<int>();
+		const auto format = j.at("format").get<std::string>();
+		if (format == "mono8")
+			header_.geometry.format = PixelFormat::Mono8;
+		else if (format == "bgr8")
+			header_.geometry.format = PixelFormat::Bgr8;
+		else
+			throw std::runtime_error("unknown pixel format '" + format + "'");
+		header_.geometry.stereo = j.at("stereo").get<bool>();
+		header_.geometry.depth = j.at("depth").get<bool>();
+		header_.geometry.truth = j.at("truth").get<bool>();
+		header_.geometry.nominal_fps = j.value("nominal_fps", 0.0);
+		header_.created_unix_ns = j.value("created_unix_ns", int64_t{0});
+	} catch (const std::exception &e) {
+		throw std::runtime_error(path + ": bad recording header: " + e.what());
+	}
+	offset_ = sizeof(kMagic) + 8 + json.size() + 4;
+}
+
+RecordingReader::~RecordingReader()
+{
+	if (file_)
+		std::fclose(file_);
+}
+
+bool RecordingReader::fail(const std::string &reason)
+{
+	report_.clean_end = false;
+	report_.cut_at_offset = offset_;
+	report_.bytes_dropped = file_size_ > offset_ ? file_size_ - offset_ : 0;
+	report_.reason = reason;
+	done_ = true;
+	return false;
+}
+
+bool RecordingReader::next(StereoFrame &into)
+{
+	if (done_)
+		return false;
+	uint32_t head[3];
+	const size_t got = std::fread(head, 1, sizeof(head), file_);
+	if (got == 0 && std::feof(file_)) {
+		done_ = true;
+		return false;
+	}
+	if (got != sizeof(head))
+		return fail("record header cut short (" + std::to_string(got) + " of 12 bytes)");
+	if (head[0] != kRecordMagic)
+		return fail("no record marker");
+	if (head[1] > kMaxPayload)
+		return fail("implausible record length " + std::to_string(head[1]));
+	buffer_.resize(head[1]);
+	const size_t payload = std::fread(buffer_.data(), 1, head[1], file_);
+	if (payload != head[1])
+		return fail("record cut short (" + std::to_string(payload) + " of " + std::to_string(head[1]) +
+			    " bytes)");
+	if (crc32_of(buffer_.data(), buffer_.size()) != head[2])
+		return fail("record fails its CRC");
+
+	try {
+		const uint8_t *cursor = buffer_.data();
+		const uint8_t *end = cursor + buffer_.size();
+		into.sequence = get<uint64_t>(cursor, end);
+		into.device_ns = get<int64_t>(cursor, end);
+		into.host_ns = get<int64_t>(cursor, end);
+		into.lr_skew_ns = get<int64_t>(cursor, end);
+		const auto status = get<uint8_t>(cursor, end);
+		if (status > static_cast<uint8_t>(FrameStatus::Corrupt))
+			throw std::runtime_error("bad frame status");
+		into.status = static_cast<FrameStatus>(status);
+		const auto images = get<uint8_t>(cursor, end);
+		(void)get<uint16_t>(cursor, end);
+		into.truth.object_count = 0;
+		if (header_.geometry.truth) {
+			for (double &value : into.truth.camera_pose)
+				value = get<double>(cursor, end);
+			const auto count = get<uint32_t>(cursor, end);
+			if (count > FrameTruth::kMaxObjects)
+				throw std::runtime_error("too many truth objects");
+			for (uint32_t i = 0; i < count; ++i) {
+				ObjectTruth &object = into.truth.objects[i];
+				object.id = get<uint16_t>(cursor, end);
+				for (double &v : object.position_m)
+					v = get<double>(cursor, end);
+				for (double &v : object.velocity_mps)
+					v = get<double>(cursor, end);
+			}
+			into.truth.object_count = count;
+		}
+		for (uint8_t i = 0; i < images; ++i) {
+			const auto role = get<uint8_t>(cursor, end);
+			(void)get<uint8_t>(cursor, end);
+			const auto type = get<uint16_t>(cursor, end);
+			const auto rows = get<uint32_t>(cursor, end);
+			const auto cols = get<uint32_t>(cursor, end);
+			cv::Mat *target = role == 0   ? &into.left
+					  : role == 1 ? &into.right
+					  : role == 2 ? &into.depth
+					  : role == 3 ? &into.truth.object_ids
+						      : nullptr;
+			if (!target || target->empty() || target->type() != type ||
+			    target->rows != static_cast<int>(rows) || target->cols != static_cast<int>(cols))
+				throw std::runtime_error("image does not match the header's geometry");
+			const size_t row_bytes = static_cast<size_t>(cols) * target->elemSize();
+			if (static_cast<size_t>(end - cursor) < row_bytes * rows)
+				throw std::runtime_error("image data cut short");
+			for (uint32_t y = 0; y < rows; ++y, cursor += row_bytes)
+				std::memcpy(target->ptr<uint8_t>(static_cast<int>(y)), cursor, row_bytes);
+		}
+	} catch (const std::exception &e) {
+		return fail(std::string("record is malformed: ") + e.what());
+	}
+	offset_ += sizeof(head) + head[1];
+	++report_.frames;
+	return true;
+}
+
+} // namespace stereod::drivers

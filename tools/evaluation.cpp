@@ -1,0 +1,119 @@
+#include "tools/evaluation.hpp"
+
+#include <cstdio>
+
+#include <opencv2/imgproc.hpp>
+
+namespace stereod::tools
+{
+namespace
+{
+
+double ratio(uint64_t num, uint64_t den)
+{
+	return den == 0 ? 0.0 : static_cast<double>(num) / static_cast<double>(den);
+}
+
+} // namespace
+
+LabelScore &LabelScore::operator+=(const LabelScore &o)
+{
+	frames += o.frames;
+	dynamic_true += o.dynamic_true;
+	dynamic_false += o.dynamic_false;
+	static_true += o.static_true;
+	static_false += o.static_false;
+	uncertain_on_mover += o.uncertain_on_mover;
+	uncertain_on_scene += o.uncertain_on_scene;
+	mover_coverage_sum += o.mover_coverage_sum;
+	return *this;
+}
+
+double LabelScore::precision() const
+{
+	return ratio(dynamic_true, dynamic_true + dynamic_false);
+}
+
+double LabelScore::recall() const
+{
+	return ratio(dynamic_true, dynamic_true + static_false);
+}
+
+double LabelScore::f1() const
+{
+	const double p = precision(), r = recall();
+	return p + r > 0 ? 2 * p * r / (p + r) : 0.0;
+}
+
+double LabelScore::static_error_rate() const
+{
+	return ratio(static_false, static_true + static_false);
+}
+
+double LabelScore::uncertain_rate() const
+{
+	const uint64_t uncertain = uncertain_on_mover + uncertain_on_scene;
+	return ratio(uncertain, uncertain + dynamic_true + dynamic_false + static_true + static_false);
+}
+
+double LabelScore::mean_coverage() const
+{
+	return frames == 0 ? 0.0 : mover_coverage_sum / static_cast<double>(frames);
+}
+
+LabelScore score_frame(const FrameResult &result, const cv::Mat &mask, int border_px)
+{
+	CV_Assert(mask.type() == CV_8UC1);
+	LabelScore score;
+	score.frames = 1;
+	score.mover_coverage_sum = static_cast<double>(cv::countNonZero(mask)) / static_cast<double>(mask.total());
+	cv::Mat ambiguous;
+	if (border_px > 0) {
+		cv::Mat grown, shrunk;
+		const cv::Mat kernel =
+			cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * border_px + 1, 2 * border_px + 1));
+		cv::dilate(mask, grown, kernel);
+		cv::erode(mask, shrunk, kernel);
+		ambiguous = grown != shrunk;
+	}
+	for (const auto &point : result.points) {
+		const int x = cvRound(point.u), y = cvRound(point.v);
+		if (x < 0 || y < 0 || x >= mask.cols || y >= mask.rows)
+			continue;
+		if (!ambiguous.empty() && ambiguous.at<uint8_t>(y, x))
+			continue;
+		const bool on_mover = mask.at<uint8_t>(y, x) != 0;
+		switch (point.label) {
+		case PointLabel::Dynamic:
+			++(on_mover ? score.dynamic_true : score.dynamic_false);
+			break;
+		case PointLabel::Static:
+			++(on_mover ? score.static_false : score.static_true);
+			break;
+		case PointLabel::Uncertain:
+			++(on_mover ? score.uncertain_on_mover : score.uncertain_on_scene);
+			break;
+		}
+	}
+	return score;
+}
+
+std::string score_table_header()
+{
+	return "| scene | frames | decided points | dynamic precision | dynamic recall | dynamic F1 | static error "
+	       "rate | uncertain | mover coverage |\n|---|---|---|---|---|---|---|---|---|";
+}
+
+std::string format_score_row(const std::string &name, const LabelScore &s)
+{
+	char line[512];
+	std::snprintf(
+		line, sizeof(line), "| %s | %llu | %llu | %.3f | %.3f | %.3f | %.4f | %.3f | %.1f%% |", name.c_str(),
+		static_cast<unsigned long long>(s.frames),
+		static_cast<unsigned long long>(s.dynamic_true + s.dynamic_false + s.static_true + s.static_false),
+		s.precision(), s.recall(), s.f1(), s.static_error_rate(), s.uncertain_rate(),
+		100.0 * s.mean_coverage());
+	return line;
+}
+
+} // namespace stereod::tools

@@ -1,0 +1,519 @@
+// stereoctl: watch the daemon, record and inspect recordings, evaluate and render results.
+#include <cerrno>
+#include <csignal>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <sys/socket.h>
+#include <sys/un.h>
+#include <unistd.h>
+
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/videoio.hpp>
+#include <spdlog/spdlog.h>
+
+#include "core/clock.hpp"
+#include "core/protocol.hpp"
+#include "drivers/replay/recording.hpp"
+#include "tools/common.hpp"
+#include "tools/evaluation.hpp"
+
+using namespace stereod;
+namespace fs = std::filesystem;
+
+namespace
+{
+
+volatile std::sig_atomic_t g_interrupted = 0; // set by SIGINT/SIGTERM in record and watch
+
+void on_signal(int)
+{
+	g_interrupted = 1;
+}
+
+void add_source_options(CLI::App &cmd, tools::SourceOptions &options)
+{
+	cmd.add_option("-c,--config", options.config_path, "stereod config file");
+	cmd.add_option("-s,--set", options.overrides, "override: section.key=value (repeatable)")
+		->allow_extra_args(false);
+	cmd.add_option("-i,--input", options.input,
+		       "recording, dataset folder or video (default: the config's source)");
+	cmd.add_option("-f,--format", options.format, "auto | recording | video | kitti | euroc | tum | folder | sim");
+}
+
+// ---------------------------------------------------------------------------------------------- watch
+int watch(const std::string &socket_path, bool raw, long max_frames, double timeout_s)
+{
+	const int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+	sockaddr_un addr{};
+	addr.sun_family = AF_UNIX;
+	std::strncpy(addr.sun_path, socket_path.c_str(), sizeof(addr.sun_path) - 1);
+	if (::connect(fd, reinterpret_cast<const sockaddr *>(&addr), sizeof(addr)) != 0) {
+		std::cerr << "stereoctl watch: cannot connect to " << socket_path << ": " << std::strerror(errno)
+			  << " (is stereod running? see output.socket)\n";
+		return 1;
+	}
+	if (timeout_s > 0) {
+		timeval tv{static_cast<time_t>(timeout_s),
+			   static_cast<suseconds_t>((timeout_s - static_cast<double>(static_cast<time_t>(timeout_s))) *
+						    1e6)};
+		::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof(tv));
+	}
+	std::string buffer;
+	char chunk[65536];
+	long frames = 0;
+	while (!g_interrupted) {
+		const ssize_t n = ::recv(fd, chunk, sizeof(chunk), 0);
+		if (n <= 0)
+			break;
+		buffer.append(chunk, static_cast<size_t>(n));
+		size_t start = 0, end = 0;
+		while ((end = buffer.find('\n', start)) != std::string::npos) {
+			const std::string line = buffer.substr(start, end - start);
+			start = end + 1;
+			if (raw) {
+				std::cout << line << '\n';
+			} else {
+				const auto m = nlohmann::json::parse(line, nullptr, false);
+				const std::string type = m.is_object() ? m.value("type", "?") : "?";
+				if (type == "frame") {
+					int s = 0, d = 0, u = 0;
+					for (const auto &p : m["points"]) {
+						const auto label = p["label"].get<std::string>();
+						(label == "static" ? s : label == "dynamic" ? d : u)++;
+					}
+					const double latency = static_cast<double>(m["t_publish_ns"].get<int64_t>() -
+										   m["t_host_ns"].get<int64_t>()) *
+							       1e-6;
+					std::cout << "frame " << m["seq"] << "  t "
+						  << m["t_capture_ns"].get<int64_t>() / 1000000 << " ms  "
+						  << m["status"].get<std::string>() << "  points " << s << " static "
+						  << d << " dynamic " << u << " uncertain  latency " << latency
+						  << " ms  timing " << m["timing_ms"].dump() << '\n';
+				} else if (type == "status") {
+					std::cout << "status  fps " << m["fps"].dump() << "  drops "
+						  << m["drops"].dump() << "  latency "
+						  << m["latency_ms"]["capture_to_publish"].dump() << "  clients "
+						  << m["clients"] << '\n';
+				} else {
+					std::cout << line << '\n';
+				}
+			}
+			if (line.find("\"type\":\"frame\"") != std::string::npos && max_frames > 0 &&
+			    ++frames >= max_frames) {
+				std::cout.flush();
+				::close(fd);
+				return 0;
+			}
+		}
+		buffer.erase(0, start);
+		std::cout.flush();
+	}
+	::close(fd);
+	return max_frames > 0 && frames < max_frames ? 1 : 0;
+}
+
+// --------------------------------------------------------------------------------------------- record
+int record(const tools::SourceOptions &options, const std::string &output, uint64_t max_frames, double seconds,
+	   bool sync)
+{
+	auto source = tools::open_source(options);
+	const auto &info = source->info();
+	StereoFrame frame;
+	frame.allocate(info.geometry);
+	drivers::RecordingHeader header{info.name, info.description, info.geometry, 0};
+	header.created_unix_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
+					 std::chrono::system_clock::now().time_since_epoch())
+					 .count();
+	drivers::RecordingWriter writer(output, header);
+	std::signal(SIGINT, on_signal);
+	std::signal(SIGTERM, on_signal);
+	const int64_t start = monotonic_ns();
+	while (!g_interrupted) {
+		if (max_frames > 0 && writer.frames_written() >= max_frames)
+			break;
+		if (seconds > 0 && static_cast<double>(monotonic_ns() - start) * 1e-9 >= seconds)
+			break;
+		const auto status = source->grab(frame);
+		if (status == drivers::GrabStatus::EndOfStream)
+			break;
+		if (status != drivers::GrabStatus::Frame)
+			continue;
+		writer.append(frame, sync);
+	}
+	std::cerr << "stereoctl record: " << writer.frames_written() << " frames, " << writer.bytes_written()
+		  << " bytes to " << output << "\n";
+	return 0;
+}
+
+// ----------------------------------------------------------------------------------------------- info
+int info(const std::string &path)
+{
+	drivers::RecordingReader reader(path);
+	const auto &h = reader.header();
+	std::cout << path << ": recorded from " << h.source << " (" << h.description << ")\n"
+		  << "  " << h.geometry.width << "x" << h.geometry.height << " " << to_string(h.geometry.format)
+		  << (h.geometry.stereo ? " stereo" : " mono") << (h.geometry.depth ? " +depth" : "")
+		  << (h.geometry.truth ? " +truth" : "") << ", nominal " << h.geometry.nominal_fps << " fps\n";
+	StereoFrame frame;
+	frame.allocate(h.geometry);
+	int64_t first = 0, last = 0;
+	uint64_t n = 0;
+	while (reader.next(frame)) {
+		if (n++ == 0)
+			first = frame.device_ns;
+		last = frame.device_ns;
+	}
+	std::cout << "  " << reader.report().describe() << "\n";
+	if (n > 1)
+		std::cout << "  span " << static_cast<double>(last - first) * 1e-9 << " s, "
+			  << static_cast<double>(n - 1) / (static_cast<double>(last - first) * 1e-9) << " fps\n";
+	return 0;
+}
+
+// ----------------------------------------------------------------------------------------------- eval
+/// Loads the mask for `seq` from a truth folder (truth.ndjson's "mask" paths, or <seq>.png / %06d.png).
+cv::Mat load_mask(const fs::path &dir, uint64_t seq)
+{
+	char padded[32];
+	std::snprintf(padded, sizeof(padded), "%06llu.png", static_cast<unsigned long long>(seq));
+	for (const fs::path &candidate : {dir / "masks" / padded, dir / padded, dir / (std::to_string(seq) + ".png")})
+		if (fs::exists(candidate))
+			return cv::imread(candidate.string(), cv::IMREAD_GRAYSCALE);
+	return {};
+}
+
+int eval(const std::string &results_path, const std::string &truth_dir, const std::string &name, int border_px,
+	 double min_coverage, const std::string &per_frame_csv, bool json_out)
+{
+	const auto results = tools::read_results(results_path);
+	tools::LabelScore all, covered;
+	uint64_t missing = 0;
+	std::ofstream csv;
+	if (!per_frame_csv.empty()) {
+		csv.open(per_frame_csv);
+		csv << "seq,static,dynamic,uncertain,precision,recall,f1,static_error_rate,coverage\n";
+	}
+	for (const auto &[seq, result] : results) {
+		if (result.points.empty())
+			continue; // the first frame has nothing to pair with
+		const cv::Mat mask = load_mask(truth_dir, seq);
+		if (mask.empty()) {
+			++missing;
+			continue;
+		}
+		const auto score = tools::score_frame(result, mask, border_px);
+		all += score;
+		if (score.mean_coverage() >= min_coverage)
+			covered += score;
+		if (csv)
+			csv << seq << ',' << score.static_true + score.static_false << ','
+			    << score.dynamic_true + score.dynamic_false << ','
+			    << score.uncertain_on_mover + score.uncertain_on_scene << ',' << score.precision() << ','
+			    << score.recall() << ',' << score.f1() << ',' << score.static_error_rate() << ','
+			    << score.mean_coverage() << '\n';
+	}
+	if (all.frames == 0) {
+		std::cerr << "stereoctl eval: no frame of " << results_path << " has a mask in " << truth_dir << "\n";
+		return 1;
+	}
+	if (json_out) {
+		auto row = [](const tools::LabelScore &s) {
+			return nlohmann::json{{"frames", s.frames},
+					      {"precision", s.precision()},
+					      {"recall", s.recall()},
+					      {"f1", s.f1()},
+					      {"static_error_rate", s.static_error_rate()},
+					      {"uncertain_rate", s.uncertain_rate()},
+					      {"mean_coverage", s.mean_coverage()}};
+		};
+		std::cout << nlohmann::json{{"name", name},
+					    {"all", row(all)},
+					    {"covered", row(covered)},
+					    {"min_coverage", min_coverage},
+					    {"frames_without_mask", missing}}
+				     .dump()
+			  << "\n";
+		return 0;
+	}
+	std::cout << tools::score_table_header() << "\n"
+		  << tools::format_score_row(name + " (all frames)", all) << "\n"
+		  << tools::format_score_row(
+			     name + " (movers >= " + std::to_string(static_cast<int>(min_coverage * 100)) + "%)",
+			     covered)
+		  << "\n";
+	if (missing)
+		std::cerr << "stereoctl eval: " << missing << " frames had no mask\n";
+	return 0;
+}
+
+// --------------------------------------------------------------------------------------------- render
+const cv::Scalar kStatic(255, 80, 0), kDynamic(0, 0, 255), kUncertain(0, 210, 255);
+
+void draw_points(cv::Mat &image, const FrameResult &result, bool arrows)
+{
+	for (const auto &p : result.points) {
+		const cv::Point2f at(p.u, p.v);
+		const cv::Scalar colour = p.label == PointLabel::Static	   ? kStatic
+					  : p.label == PointLabel::Dynamic ? kDynamic
+									   : kUncertain;
+		if (arrows && p.label != PointLabel::Uncertain)
+			cv::line(image, cv::Point2f(p.prev_u, p.prev_v), at, colour, 1, cv::LINE_AA);
+		const int radius = p.label == PointLabel::Uncertain ? 2 : 4;
+		cv::circle(image, at, radius, colour, p.label == PointLabel::Uncertain ? 1 : cv::FILLED, cv::LINE_AA);
+	}
+	int s = 0, d = 0, u = 0;
+	for (const auto &p : result.points)
+		(p.label == PointLabel::Static ? s : p.label == PointLabel::Dynamic ? d : u)++;
+	const std::string text = "seq " + std::to_string(result.seq) + "  static " + std::to_string(s) + "  dynamic " +
+				 std::to_string(d) + "  uncertain " + std::to_string(u);
+	cv::rectangle(image, cv::Rect(0, 0, image.cols, 26), cv::Scalar(0, 0, 0), cv::FILLED);
+	cv::putText(image, text, cv::Point(8, 18), cv::FONT_HERSHEY_SIMPLEX, 0.55, cv::Scalar(255, 255, 255), 1,
+		    cv::LINE_AA);
+}
+
+/// Per-frame static/dynamic counts and stage times, like the seed's Figures 12-13.
+cv::Mat plot(const std::map<uint64_t, FrameResult> &results)
+{
+	const int w = 1000, h = 640, margin = 60;
+	cv::Mat canvas(h, w, CV_8UC3, cv::Scalar(255, 255, 255));
+	if (results.empty())
+		return canvas;
+	const double first = static_cast<double>(results.begin()->first);
+	const double last = std::max(first + 1, static_cast<double>(results.rbegin()->first));
+	int max_count = 1;
+	double max_ms = 1;
+	for (const auto &[seq, r] : results) {
+		max_count = std::max(max_count, static_cast<int>(r.points.size()));
+		for (const auto &t : r.timing)
+			max_ms = std::max(max_ms, t.ms);
+	}
+	auto panel = [&](int top, int height, const char *title) {
+		cv::rectangle(canvas, cv::Rect(margin, top, w - 2 * margin, height), cv::Scalar(0, 0, 0));
+		cv::putText(canvas, title, cv::Point(margin, top - 8), cv::FONT_HERSHEY_SIMPLEX, 0.5,
+			    cv::Scalar(0, 0, 0), 1, cv::LINE_AA);
+	};
+	const int top1 = 40, height1 = 240, top2 = 340, height2 = 240;
+	panel(top1, height1,
+	      ("points per frame (max " + std::to_string(max_count) + "): blue static, red dynamic").c_str());
+	panel(top2, height2,
+	      ("stage time per frame, ms (max " + std::to_string(static_cast<int>(max_ms)) +
+	       "): green extract, orange match, purple classify")
+		      .c_str());
+	auto x_of = [&](double seq) { return margin + (seq - first) / (last - first) * (w - 2 * margin); };
+	std::map<std::string, cv::Scalar> stage_colour = {{"extract", cv::Scalar(0, 160, 0)},
+							  {"match", cv::Scalar(0, 140, 255)},
+							  {"classify", cv::Scalar(160, 0, 160)}};
+	std::map<std::string, cv::Point2d> previous_stage;
+	cv::Point2d prev_s, prev_d;
+	bool have_prev = false;
+	for (const auto &[seq, r] : results) {
+		int s = 0, d = 0;
+		for (const auto &p : r.points)
+			(p.label == PointLabel::Static ? s : p.label == PointLabel::Dynamic ? d : s += 0);
+		const double x = x_of(static_cast<double>(seq));
+		const cv::Point2d ps(x, top1 + height1 - static_cast<double>(s) / max_count * height1);
+		const cv::Point2d pd(x, top1 + height1 - static_cast<double>(d) / max_count * height1);
+		if (have_prev) {
+			cv::line(canvas, prev_s, ps, kStatic, 1, cv::LINE_AA);
+			cv::line(canvas, prev_d, pd, kDynamic, 1, cv::LINE_AA);
+		}
+		prev_s = ps, prev_d = pd, have_prev = true;
+		for (const auto &t : r.timing) {
+			const auto colour = stage_colour.find(t.name);
+			if (colour == stage_colour.end())
+				continue;
+			const cv::Point2d pt(x, top2 + height2 - t.ms / max_ms * height2);
+			if (auto it = previous_stage.find(t.name); it != previous_stage.end())
+				cv::line(canvas, it->second, pt, colour->second, 1, cv::LINE_AA);
+			previous_stage[t.name] = pt;
+		}
+	}
+	cv::putText(canvas,
+		    "frame " + std::to_string(static_cast<long>(first)) + " .. " +
+			    std::to_string(static_cast<long>(last)),
+		    cv::Point(margin, h - 20), cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(0, 0, 0), 1, cv::LINE_AA);
+	return canvas;
+}
+
+int render(const tools::SourceOptions &options, const std::string &results_path, const std::string &truth_dir,
+	   const std::string &out_dir, const std::string &video_path, const std::string &sheet_path,
+	   const std::vector<uint64_t> &sheet_frames, int every, bool arrows)
+{
+	const auto results =
+		results_path.empty() ? std::map<uint64_t, FrameResult>{} : tools::read_results(results_path);
+	auto source = tools::open_source(options);
+	StereoFrame frame;
+	frame.allocate(source->info().geometry);
+	if (!out_dir.empty())
+		fs::create_directories(out_dir);
+	cv::VideoWriter video;
+	std::vector<cv::Mat> sheet;
+	cv::Mat canvas;
+	uint64_t written = 0;
+	while (source->grab(frame) == drivers::GrabStatus::Frame) {
+		const bool want_file =
+			!out_dir.empty() && every > 0 && frame.sequence % static_cast<uint64_t>(every) == 0;
+		const bool want_sheet =
+			std::find(sheet_frames.begin(), sheet_frames.end(), frame.sequence) != sheet_frames.end();
+		if (!want_file && !want_sheet && video_path.empty())
+			continue;
+		if (frame.left.channels() == 1)
+			cv::cvtColor(frame.left, canvas, cv::COLOR_GRAY2BGR);
+		else
+			frame.left.copyTo(canvas);
+		if (!truth_dir.empty()) {
+			// Movers from the ground truth, tinted green, to check labels by eye.
+			const cv::Mat mask = load_mask(truth_dir, frame.sequence);
+			if (!mask.empty()) {
+				cv::Mat tinted;
+				cv::addWeighted(canvas, 0.6,
+						cv::Mat(canvas.size(), canvas.type(), cv::Scalar(0, 255, 0)), 0.4, 0,
+						tinted);
+				tinted.copyTo(canvas, mask);
+			}
+		}
+		if (auto it = results.find(frame.sequence); it != results.end())
+			draw_points(canvas, it->second, arrows);
+		if (want_file) {
+			char name[32];
+			std::snprintf(name, sizeof(name), "%06llu.png",
+				      static_cast<unsigned long long>(frame.sequence));
+			cv::imwrite((fs::path(out_dir) / name).string(), canvas);
+			++written;
+		}
+		if (want_sheet)
+			sheet.push_back(canvas.clone());
+		if (!video_path.empty()) {
+			if (!video.isOpened()) {
+				const double fps = source->info().geometry.nominal_fps > 0
+							   ? source->info().geometry.nominal_fps
+							   : 10;
+				video.open(video_path, cv::VideoWriter::fourcc('M', 'J', 'P', 'G'), fps, canvas.size());
+				if (!video.isOpened())
+					throw std::runtime_error(video_path + ": cannot write video");
+			}
+			video.write(canvas);
+		}
+	}
+	if (!sheet_path.empty()) {
+		if (sheet.empty())
+			throw std::runtime_error("--sheet: none of the requested frames was found");
+		const int cols = sheet.size() >= 4 ? 2 : 1;
+		std::vector<cv::Mat> rows;
+		for (size_t i = 0; i < sheet.size(); i += static_cast<size_t>(cols)) {
+			std::vector<cv::Mat> row(sheet.begin() + static_cast<std::ptrdiff_t>(i),
+						 sheet.begin() +
+							 static_cast<std::ptrdiff_t>(std::min(sheet.size(), i + cols)));
+			while (row.size() < static_cast<size_t>(cols))
+				row.push_back(cv::Mat::zeros(sheet[0].size(), sheet[0].type()));
+			cv::Mat joined;
+			cv::hconcat(row, joined);
+			rows.push_back(joined);
+		}
+		cv::Mat full;
+		cv::vconcat(rows, full);
+		if (full.cols > 1600)
+			cv::resize(full, full, cv::Size(), 1600.0 / full.cols, 1600.0 / full.cols, cv::INTER_AREA);
+		cv::imwrite(sheet_path, full);
+		std::cerr << "stereoctl render: contact sheet of " << sheet.size() << " frames -> " << sheet_path
+			  << "\n";
+	}
+	if (!out_dir.empty()) {
+		cv::imwrite((fs::path(out_dir) / "plot.png").string(), plot(results));
+		std::cerr << "stereoctl render: " << written << " frames and plot.png -> " << out_dir << "\n";
+	}
+	return 0;
+}
+
+} // namespace
+
+int main(int argc, char **argv)
+{
+	CLI::App app{"stereoctl: watch stereod, record and inspect recordings, evaluate and render results"};
+	app.require_subcommand(1);
+	spdlog::set_pattern("%Y-%m-%d %H:%M:%S.%e %^%l%$ %v");
+
+	auto *watch_cmd = app.add_subcommand("watch", "print the messages stereod streams");
+	std::string socket_path = "/tmp/stereod.sock";
+	bool raw = false;
+	long max_frames = 0;
+	double timeout_s = 0;
+	watch_cmd->add_option("-S,--socket", socket_path, "stereod's socket (output.socket)");
+	watch_cmd->add_flag("--raw", raw, "print the JSON lines as they come");
+	watch_cmd->add_option("-n,--count", max_frames, "exit after this many frame messages");
+	watch_cmd->add_option("--timeout", timeout_s, "give up after this many seconds without data");
+
+	auto *record_cmd = app.add_subcommand("record", "record any source to a .srec file");
+	tools::SourceOptions record_opts;
+	record_opts.realtime = true;
+	std::string record_out;
+	uint64_t record_frames = 0;
+	double record_seconds = 0;
+	bool record_sync = false;
+	add_source_options(*record_cmd, record_opts);
+	record_cmd->add_option("-o,--output", record_out, "recording to write (.srec)")->required();
+	record_cmd->add_option("-n,--frames", record_frames, "stop after this many frames");
+	record_cmd->add_option("-t,--seconds", record_seconds, "stop after this many seconds");
+	record_cmd->add_flag("--sync", record_sync, "flush every frame to the disk before the next");
+
+	auto *info_cmd = app.add_subcommand("info", "describe a recording and check every record");
+	std::string info_path;
+	info_cmd->add_option("recording", info_path, "a .srec file")->required();
+
+	auto *eval_cmd = app.add_subcommand("eval", "score labelled points against ground-truth masks");
+	std::string eval_results, eval_truth, eval_name = "run", eval_csv;
+	int eval_border = 0;
+	double eval_coverage = 0.02;
+	bool eval_json = false;
+	eval_cmd->add_option("-r,--results", eval_results, "NDJSON written by stereod process")->required();
+	eval_cmd->add_option("-t,--truth", eval_truth, "folder with masks (stereod process --truth-dir, or <seq>.png)")
+		->required();
+	eval_cmd->add_option("--name", eval_name, "row name in the table");
+	eval_cmd->add_option("--border", eval_border, "ignore points this close to a mover's outline, pixels");
+	eval_cmd->add_option("--min-coverage", eval_coverage, "second row: frames whose movers cover at least this");
+	eval_cmd->add_option("--per-frame", eval_csv, "write per-frame scores to this CSV");
+	eval_cmd->add_flag("--json", eval_json, "print one JSON object instead of the table");
+
+	auto *render_cmd = app.add_subcommand("render", "draw results onto the input's frames");
+	tools::SourceOptions render_opts;
+	std::string render_results, render_truth, render_out, render_video, render_sheet;
+	std::vector<uint64_t> render_sheet_frames;
+	int render_every = 1;
+	bool render_arrows = false;
+	add_source_options(*render_cmd, render_opts);
+	render_cmd->add_option("-r,--results", render_results, "NDJSON from stereod process");
+	render_cmd->add_option("-t,--truth", render_truth, "tint the ground truth's movers (a --truth-dir folder)");
+	render_cmd->add_option("-o,--out", render_out, "folder for annotated PNGs and plot.png");
+	render_cmd->add_option("--every", render_every, "write every Nth frame");
+	render_cmd->add_option("--video", render_video, "also write an annotated video (MJPG .avi)");
+	render_cmd->add_option("--sheet", render_sheet, "write a contact sheet of --frames to this PNG");
+	render_cmd->add_option("--frames", render_sheet_frames, "frame numbers for the contact sheet")->delimiter(',');
+	render_cmd->add_flag("--arrows", render_arrows, "draw each point's motion from the previous frame");
+
+	CLI11_PARSE(app, argc, argv);
+	try {
+		if (*watch_cmd) {
+			std::signal(SIGINT, on_signal);
+			return watch(socket_path, raw, max_frames, timeout_s);
+		}
+		if (*record_cmd)
+			return record(record_opts, record_out, record_frames, record_seconds, record_sync);
+		if (*info_cmd)
+			return info(info_path);
+		if (*eval_cmd)
+			return eval(eval_results, eval_truth, eval_name, eval_border, eval_coverage, eval_csv,
+				    eval_json);
+		if (*render_cmd)
+			return render(render_opts, render_results, render_truth, render_out, render_video, render_sheet,
+				      render_sheet_frames, render_every, render_arrows);
+	} catch (const std::exception &e) {
+		std::cerr << "stereoctl: " << e.what() << "\n";
+		return 2;
+	}
+	return 0;
+}
