@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <functional>
 #include <map>
@@ -219,9 +220,6 @@ const std::vector<Option> &options()
 		o.push_back(number(
 			"features", "orb_fast_threshold", "FAST corner threshold",
 			[](DaemonConfig &c) -> int & { return c.motion.features.orb_fast_threshold; }, 1, 100));
-		o.push_back(number(
-			"features", "colour_radius", "patch radius for keypoint colours (eq. 3)",
-			[](DaemonConfig &c) -> int & { return c.motion.features.colour_radius; }, 0, 10));
 		// [matching]
 		o.push_back(number(
 			"matching", "ratio", "Lowe ratio test; 1 = off",
@@ -274,14 +272,26 @@ const std::vector<Option> &options()
 			"classifier", "texture_threshold", "T of eqs. 2 and 7, 8-bit units",
 			[](DaemonConfig &c) -> double & { return c.motion.classifier.texture_threshold; }, 0, 255));
 		o.push_back(number(
+			"classifier", "colour_radius", "colours are means of (2r+1)^2 pixels (eqs. 3, 6)",
+			[](DaemonConfig &c) -> int & { return c.motion.classifier.colour_radius; }, 0, 10));
+		o.push_back(number(
 			"classifier", "min_matches", "fewer matches: no homography, all uncertain",
 			[](DaemonConfig &c) -> int & { return c.motion.classifier.min_matches; }, 4, 100000));
 		// [output]
 		o.push_back(text("output", "socket", "Unix socket path for clients",
 				 [](DaemonConfig &c) -> std::string & { return c.output.socket; }));
-		o.push_back(number(
-			"output", "socket_mode", "permissions of the socket file (0660 = 432)",
-			[](DaemonConfig &c) -> int & { return c.output.socket_mode; }, 0, 0777));
+		{
+			// Shown in TOML's octal form, as permissions are read.
+			Option mode = number(
+				"output", "socket_mode", "permissions of the socket file (TOML octal, e.g. 0o660)",
+				[](DaemonConfig &c) -> int & { return c.output.socket_mode; }, 0, 0777);
+			mode.show = [](const DaemonConfig &c) {
+				char text[16];
+				std::snprintf(text, sizeof(text), "0o%o", static_cast<unsigned>(c.output.socket_mode));
+				return std::string(text);
+			};
+			o.push_back(std::move(mode));
+		}
 		o.push_back(number(
 			"output", "client_queue", "messages queued per client; a slow client loses its oldest",
 			[](DaemonConfig &c) -> int & { return c.output.client_queue; }, 1, 1000000));

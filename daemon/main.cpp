@@ -2,6 +2,7 @@
 #include <iostream>
 
 #include <CLI/CLI.hpp>
+#include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 
 #include "daemon/app.hpp"
@@ -38,6 +39,8 @@ int main(int argc, char **argv)
 	process->fallthrough(); // --config and --set work after `process` too
 
 	CLI11_PARSE(app, argc, argv);
+	// Logs go to standard error: standard output may carry results (`process --output -`, `watch`).
+	spdlog::set_default_logger(spdlog::stderr_color_mt("stereod"));
 	spdlog::set_pattern("%Y-%m-%d %H:%M:%S.%e %^%l%$ %v");
 
 	try {

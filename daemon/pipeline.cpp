@@ -14,7 +14,8 @@ Pipeline::Pipeline(std::unique_ptr<drivers::FrameSource> source, PipelineOptions
 	  source_name_(source_->info().name),
 	  // Enough frames for a full ring, a full job queue, one per worker and the one being captured.
 	  pool_(options_.ring_capacity + 2 * options_.workers + options_.workers + 2, source_->info().geometry),
-	  ring_(options_.ring_capacity, options_.overflow), jobs_capacity_(2 * options_.workers)
+	  ring_(options_.ring_capacity, options_.overflow), jobs_capacity_(2 * options_.workers),
+	  max_in_flight_(jobs_capacity_ + options_.workers + 1)
 {
 	if (options_.workers == 0)
 		throw std::invalid_argument("pipeline needs at least one worker");
@@ -38,9 +39,10 @@ void Pipeline::start()
 
 void Pipeline::request_stop()
 {
+	// The capture thread sees stop_, hands over the frame it holds and closes the ring itself, so a frame
+	// already grabbed is never lost on the way out.
 	stop_.store(true);
 	pool_.wake_waiters();
-	ring_.close();
 }
 
 void Pipeline::wait()
@@ -157,6 +159,12 @@ void Pipeline::dispatch_loop()
 		job->provides_features = job->frame->status != FrameStatus::Corrupt;
 		if (job->provides_features)
 			previous = job->features.get_future().share();
+		{
+			// Bound the frames in flight, so a slow sink backs up into the ring (where the overflow
+			// policy decides) instead of into an ever-growing pile of finished results.
+			std::unique_lock lock(results_mutex_);
+			results_changed_.wait(lock, [&] { return job->order < published_upto_ + max_in_flight_; });
+		}
 		std::unique_lock lock(jobs_mutex_);
 		jobs_changed_.wait(lock, [this] { return jobs_.size() < jobs_capacity_; });
 		jobs_.push_back(std::move(job));
@@ -255,8 +263,15 @@ void Pipeline::publish_loop()
 		result.t_publish_ns = monotonic_ns();
 		sink_(result);
 		published_.fetch_add(1);
-		std::lock_guard lock(state_mutex_);
-		latency_.add(result.t_publish_ns - result.t_host_ns);
+		{
+			std::lock_guard lock(state_mutex_);
+			latency_.add(result.t_publish_ns - result.t_host_ns);
+		}
+		{
+			std::lock_guard lock(results_mutex_);
+			published_upto_ = next;
+		}
+		results_changed_.notify_all();
 	}
 	finished_.store(true);
 }

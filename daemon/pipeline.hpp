@@ -114,6 +114,8 @@ private:
 	std::condition_variable results_changed_;
 	std::map<uint64_t, FrameResult> results_;
 	uint64_t dispatched_ = 0;
+	uint64_t published_upto_ = 0; ///< results [0, published_upto_) have left through the sink
+	size_t max_in_flight_;
 	bool dispatch_done_ = false;
 
 	std::atomic<bool> stop_{false};

@@ -224,34 +224,51 @@ void SocketServer::accept_clients()
 
 void SocketServer::flush(int fd, Client &client)
 {
-	while (!client.queue.empty()) {
-		if (client.offset == 0 && client.dropped_unreported > 0) {
-			client.queue.push_front(std::make_shared<const std::string>(
+	auto send_some = [&](const std::string &data, size_t &offset) {
+		const ssize_t sent =
+			::send(fd, data.data() + offset, data.size() - offset, MSG_DONTWAIT | MSG_NOSIGNAL);
+		if (sent < 0)
+			return errno == EAGAIN || errno == EWOULDBLOCK ? 0 : -1;
+		offset += static_cast<size_t>(sent);
+		return offset == data.size() ? 1 : 0;
+	};
+	for (;;) {
+		// A lag notice goes out between two messages, never inside one; it lives outside the queue so
+		// that dropping the oldest queued message can never drop the notice.
+		if (client.lag.empty() && client.offset == 0 && client.dropped_unreported > 0) {
+			client.lag =
 				protocol::lag_message(monotonic_ns(), client.dropped_total, client.dropped_unreported) +
-				"\n"));
+				"\n";
+			client.lag_offset = 0;
 			client.dropped_unreported = 0;
 		}
-		const std::string &front = *client.queue.front();
-		const ssize_t sent = ::send(fd, front.data() + client.offset, front.size() - client.offset,
-					    MSG_DONTWAIT | MSG_NOSIGNAL);
-		if (sent < 0) {
-			if (errno == EAGAIN || errno == EWOULDBLOCK)
-				break;
+		int done = 0;
+		if (!client.lag.empty()) {
+			done = send_some(client.lag, client.lag_offset);
+			if (done == 1)
+				client.lag.clear();
+		} else if (!client.queue.empty()) {
+			done = send_some(*client.queue.front(), client.offset);
+			if (done == 1) {
+				client.queue.pop_front();
+				client.offset = 0;
+			}
+		} else {
+			break;
+		}
+		if (done < 0) {
 			close_client(fd, false);
 			return;
 		}
-		client.offset += static_cast<size_t>(sent);
-		if (client.offset == front.size()) {
-			client.queue.pop_front();
-			client.offset = 0;
-		}
+		if (done == 0)
+			break; // the socket is full: wait for EPOLLOUT
 	}
 	update_interest(fd, client, false);
 }
 
 void SocketServer::update_interest(int fd, Client &client, bool force)
 {
-	const bool want = !client.queue.empty();
+	const bool want = !client.queue.empty() || !client.lag.empty();
 	if (want == client.writable_wait && !force)
 		return;
 	epoll_event ev{};

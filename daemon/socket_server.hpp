@@ -52,6 +52,8 @@ private:
 		size_t offset = 0; ///< bytes of queue.front() already sent
 		uint64_t dropped_total = 0;
 		uint64_t dropped_unreported = 0;
+		std::string lag;       ///< a lag notice being sent
+		size_t lag_offset = 0; ///< bytes of `lag` already sent
 		size_t input_bytes = 0;
 		bool writable_wait = false; ///< registered for EPOLLOUT
 		bool input_closed = false;  ///< the client shut down its sending side

@@ -12,7 +12,7 @@ packages=(
   # real photographs for the sim scene's textures and the real-data tests (same files as ../shared/data)
   opencv-doc
   # tools the tests and the README use as real clients
-  socat
+  socat jq procps
 )
 
 missing=()

@@ -14,6 +14,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
+#include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 
 #include "core/clock.hpp"
@@ -436,6 +437,8 @@ int main(int argc, char **argv)
 {
 	CLI::App app{"stereoctl: watch stereod, record and inspect recordings, evaluate and render results"};
 	app.require_subcommand(1);
+	// Logs go to standard error: standard output may carry results (`process --output -`, `watch`).
+	spdlog::set_default_logger(spdlog::stderr_color_mt("stereoctl"));
 	spdlog::set_pattern("%Y-%m-%d %H:%M:%S.%e %^%l%$ %v");
 
 	auto *watch_cmd = app.add_subcommand("watch", "print the messages stereod streams");

@@ -27,8 +27,8 @@ struct ClassifierParams {
 	double ransac_threshold_px = 3.0;   ///< RANSAC inlier distance for both homography fits
 	double reprojection_sigma_px = 1.0; ///< feature position noise (isotropic Gaussian) for eq. 1
 	double reprojection_chi2 = 13.28;   ///< Mahalanobis gate on eq. 1 (chi-square, 4 dof, 99%)
-	double static_theta = 0.5;	    ///< eq. 5 static window: du^2 < theta * Umax
-	double static_eta = 0.5;	    ///< eq. 5 static window: dv^2 < eta * Vmax
+	double static_theta = 0.9;	    ///< eq. 5 static window: du^2 < theta * Umax
+	double static_eta = 0.9;	    ///< eq. 5 static window: dv^2 < eta * Vmax
 	double dynamic_theta = 1.0;	    ///< eq. 5 on the dynamic candidates' motion relative to the scene
 	double dynamic_eta = 1.0;
 	double area_floor_px = 2.0;	      ///< windows never shrink below this many pixels (still camera)
@@ -36,8 +36,8 @@ struct ClassifierParams {
 	double alpha = 0.299;		      ///< eq. 3 weight of R
 	double beta = 0.587;		      ///< eq. 3 weight of G
 	double gamma = 0.114;		      ///< eq. 3 weight of B (alpha + beta + gamma = 1, eq. 4)
-	double texture_threshold = 20.0;      ///< T, in 8-bit intensity units
-	int colour_radius = 2;		      ///< patch radius for colours sampled at projected points
+	double texture_threshold = 12.0;      ///< T, in 8-bit intensity units
+	int colour_radius = 1;		      ///< patch radius for colours sampled at projected points
 	int min_matches = 12;		      ///< fewer matches: no homography, everything Uncertain
 };
 

@@ -66,7 +66,7 @@ std::vector<cv::KeyPoint> bucket_keypoints(std::vector<cv::KeyPoint> keypoints, 
 	return kept;
 }
 
-FrameFeatures extract_features(const cv::Mat &image, const FeatureParams &params)
+FrameFeatures extract_features(const cv::Mat &image, const FeatureParams &params, int colour_radius)
 {
 	cv::Mat grey;
 	if (image.channels() == 3)
@@ -86,7 +86,7 @@ FrameFeatures extract_features(const cv::Mat &image, const FeatureParams &params
 	features.norm_type = cv::NORM_HAMMING;
 	features.colours.reserve(features.keypoints.size());
 	for (const auto &kp : features.keypoints)
-		features.colours.push_back(sample_colour(image, kp.pt, params.colour_radius));
+		features.colours.push_back(sample_colour(image, kp.pt, colour_radius));
 	return features;
 }
 

@@ -16,7 +16,6 @@ struct FeatureParams {
 	int orb_levels = 4;	 ///< pyramid levels (OpenCV's default 8 costs twice as much for little gain here)
 	float orb_scale = 1.2F;
 	int orb_fast_threshold = 12;
-	int colour_radius = 2; ///< colours are the mean of a (2r+1)^2 patch, less sensitive to noise than a pixel
 };
 
 /// Keypoints and what the classifier needs of them later, so the image itself can be released.
@@ -34,7 +33,7 @@ cv::Vec3f sample_colour(const cv::Mat &image, cv::Point2f at, int radius);
 std::vector<cv::KeyPoint> bucket_keypoints(std::vector<cv::KeyPoint> keypoints, cv::Size image_size, int grid_cols,
 					   int grid_rows, int max_total);
 
-/// Detects, buckets and describes; `image` is BGR or grey.
-FrameFeatures extract_features(const cv::Mat &image, const FeatureParams &params);
+/// Detects, buckets and describes; `image` is BGR or grey. Colours are patch means of radius colour_radius.
+FrameFeatures extract_features(const cv::Mat &image, const FeatureParams &params, int colour_radius);
 
 } // namespace stereod::vision

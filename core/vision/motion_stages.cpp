@@ -8,7 +8,7 @@ namespace stereod::vision
 FrameFeatures extract_stage(const StereoFrame &frame, const MotionParams &params, std::vector<StageTime> &timing)
 {
 	StageTimer timer(timing, "extract");
-	return extract_features(frame.left, params.features);
+	return extract_features(frame.left, params.features, params.classifier.colour_radius);
 }
 
 void pair_stage(const FrameFeatures *prev, const FrameFeatures &cur, const StereoFrame &frame,

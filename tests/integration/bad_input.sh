@@ -1,0 +1,34 @@
+#!/usr/bin/env bash
+# Bad input gets one clear error naming what is wrong, and nothing is lost.
+source "$(dirname "$0")/lib.sh"
+
+expect_error() { # name, expected text, command...
+	local name=$1 want=$2
+	shift 2
+	if "$@" >"$WORK/out" 2>"$WORK/err"; then fail "$name: succeeded"; fi
+	grep -qF -- "$want" "$WORK/err" || fail "$name: stderr lacks '$want': $(cat "$WORK/err")"
+	[ "$(grep -c . "$WORK/err")" -eq 1 ] || fail "$name: more than one line of error: $(cat "$WORK/err")"
+	pass "$name: $(cat "$WORK/err")"
+}
+
+printf '[sim]\nwidth = 640\nheight 480\n' >"$WORK/malformed.toml"
+expect_error "malformed line" "malformed.toml:3: syntax error" "$STEREOD" --config "$WORK/malformed.toml"
+printf '[sim]\nwidth = 640\n\n[output]\nsokcet = "/tmp/x"\n' >"$WORK/unknown.toml"
+expect_error "unknown key" "unknown.toml:5: unknown key 'output.sokcet'" "$STEREOD" --config "$WORK/unknown.toml"
+printf '[pipeline]\nworkers = -1\n' >"$WORK/range.toml"
+expect_error "out of range" "range.toml:2: pipeline.workers: must be between 0 and 256 (got -1)" \
+	"$STEREOD" --config "$WORK/range.toml"
+expect_error "missing config" "cannot read config file" "$STEREOD" --config "$WORK/absent.toml"
+expect_error "missing input" "--input $WORK/nope.avi: no such file or directory" \
+	"$STEREOD" process --input "$WORK/nope.avi" --output "$WORK/x.ndjson"
+echo "not a recording" >"$WORK/fake.srec"
+expect_error "not a recording" "not a stereod recording" \
+	"$STEREOD" process --input "$WORK/fake.srec" --format recording --output "$WORK/x.ndjson"
+
+# A truncated recording is not an error: its complete frames are processed and the cut is reported once.
+"$STEREOCTL" record "${SMALL_SIM[@]}" --frames 5 --output "$WORK/five.srec" 2>/dev/null
+truncate -s $(($(stat -c %s "$WORK/five.srec") - 10)) "$WORK/five.srec"
+"$STEREOD" process --input "$WORK/five.srec" --output "$WORK/five.ndjson" 2>"$WORK/err" || fail "truncated replay failed"
+[ "$(wc -l <"$WORK/five.ndjson")" -eq 4 ] || fail "truncated recording: want the 4 complete frames"
+grep -q "4 complete frames recovered; cut at byte" "$WORK/err" || fail "no cut report: $(cat "$WORK/err")"
+pass "truncated recording: $(grep -o 'replay: .*' "$WORK/err")"

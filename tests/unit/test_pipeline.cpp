@@ -1,0 +1,96 @@
+#include <gtest/gtest.h>
+
+#include <mutex>
+#include <thread>
+
+#include "daemon/pipeline.hpp"
+
+using namespace stereod;
+using namespace stereod::daemon;
+
+namespace
+{
+
+std::unique_ptr<drivers::FrameSource> small_sim(uint64_t frames, bool realtime, double fps = 30)
+{
+	drivers::SourceConfig config;
+	config.realtime = realtime;
+	config.sim.width = 320;
+	config.sim.height = 240;
+	config.sim.frames = frames;
+	config.sim.fps = fps;
+	config.sim.stereo = false;
+	return drivers::SourceRegistry::with_builtin_drivers().create(config);
+}
+
+} // namespace
+
+TEST(Pipeline, BlockPublishesEveryFrameInOrder)
+{
+	std::vector<FrameResult> results;
+	PipelineOptions options;
+	options.workers = 3;
+	options.ring_capacity = 2;
+	options.overflow = OverflowPolicy::Block;
+	options.motion.features.max_features = 300;
+	Pipeline pipeline(small_sim(40, false), options, [&](FrameResult &r) { results.push_back(std::move(r)); });
+	pipeline.start();
+	pipeline.wait();
+	ASSERT_EQ(results.size(), 40U);
+	for (size_t i = 0; i < results.size(); ++i) {
+		EXPECT_EQ(results[i].seq, i);
+		EXPECT_GE(results[i].t_publish_ns, results[i].t_host_ns);
+		if (i > 0) {
+			EXPECT_FALSE(results[i].points.empty()) << "frame " << i << " pairs with frame " << i - 1;
+		}
+	}
+	EXPECT_TRUE(results[0].points.empty()) << "the first frame has nothing to pair with";
+	const auto stats = pipeline.stats();
+	EXPECT_EQ(stats.frames_captured, 40U);
+	EXPECT_EQ(stats.ring_evicted, 0U);
+	EXPECT_EQ(stats.source_state, "finished");
+}
+
+TEST(Pipeline, DropOldestCountsWhatASlowConsumerLoses)
+{
+	std::vector<uint64_t> published;
+	PipelineOptions options;
+	options.workers = 1;
+	options.ring_capacity = 2;
+	options.overflow = OverflowPolicy::DropOldest;
+	options.motion.enabled = false;
+	Pipeline pipeline(small_sim(60, true, 200), options, [&](FrameResult &r) {
+		published.push_back(r.seq);
+		std::this_thread::sleep_for(std::chrono::milliseconds(15)); // far slower than 200 fps
+	});
+	pipeline.start();
+	pipeline.wait();
+	const auto stats = pipeline.stats();
+	EXPECT_EQ(stats.frames_captured, 60U);
+	EXPECT_GT(stats.ring_evicted + stats.pool_exhausted, 0U);
+	EXPECT_EQ(published.size() + stats.ring_evicted + stats.pool_exhausted, 60U)
+		<< "every captured frame is either published or counted as dropped";
+	for (size_t i = 1; i < published.size(); ++i)
+		EXPECT_LT(published[i - 1], published[i]);
+}
+
+TEST(Pipeline, StopDrainsWhatWasCaptured)
+{
+	std::mutex m;
+	uint64_t count = 0;
+	PipelineOptions options;
+	options.workers = 2;
+	options.overflow = OverflowPolicy::Block;
+	options.motion.features.max_features = 200;
+	Pipeline pipeline(small_sim(0, true, 60), options, [&](FrameResult &) {
+		std::lock_guard lock(m);
+		++count;
+	});
+	pipeline.start();
+	std::this_thread::sleep_for(std::chrono::milliseconds(300));
+	pipeline.request_stop();
+	pipeline.wait();
+	EXPECT_EQ(count, pipeline.stats().frames_captured) << "nothing captured is lost on stop";
+	EXPECT_GT(count, 5U);
+	EXPECT_EQ(pipeline.stats().source_state, "stopped");
+}

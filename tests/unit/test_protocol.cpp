@@ -1,0 +1,89 @@
+#include <gtest/gtest.h>
+
+#include <nlohmann/json.hpp>
+
+#include "core/latency.hpp"
+#include "core/protocol.hpp"
+
+using namespace stereod;
+
+TEST(Protocol, FrameMessageCarriesTheDocumentedFields)
+{
+	FrameResult r;
+	r.seq = 42;
+	r.t_capture_ns = 1'000'000'000;
+	r.t_host_ns = 2'000'000'000;
+	r.t_publish_ns = 2'010'000'000;
+	r.source = "sim";
+	r.status = FrameStatus::Incomplete;
+	r.timing = {{"extract", 1.23456}, {"match", 0.5}};
+	r.points = {{10.123F, 20.5F, PointLabel::Dynamic, 8.0F, 20.0F, std::array<float, 3>{1.0F, 2.0F, 3.0F}},
+		    {1.0F, 2.0F, PointLabel::Static, 1.0F, 2.0F, std::nullopt}};
+	const auto j = nlohmann::json::parse(protocol::frame_message(r));
+	for (const char *key : {"v", "type", "seq", "t_capture_ns", "t_host_ns", "t_publish_ns", "source", "status",
+				"timing_ms", "points", "ego", "groups"})
+		EXPECT_TRUE(j.contains(key)) << key;
+	EXPECT_EQ(j["v"], protocol::kVersion);
+	EXPECT_EQ(j["type"], "frame");
+	EXPECT_EQ(j["status"], "incomplete");
+	EXPECT_EQ(j["points"][0]["label"], "dynamic");
+	EXPECT_EQ(j["points"][0]["u"], 10.12);
+	EXPECT_TRUE(j["points"][0].contains("xyz_m"));
+	EXPECT_FALSE(j["points"][1].contains("xyz_m")) << "never invented";
+	EXPECT_TRUE(j["ego"].is_null()) << "no stage computed it";
+	EXPECT_TRUE(j["groups"].empty());
+}
+
+TEST(Protocol, FrameMessageRoundTrips)
+{
+	FrameResult r;
+	r.seq = 7;
+	r.source = "video";
+	r.points = {{5.5F, 6.25F, PointLabel::Uncertain, 5.0F, 6.0F, std::nullopt}};
+	r.ego = EgoMotion{{1, 0, 2, 0, 1, 3, 0, 0, 1}, 99};
+	const FrameResult back = protocol::parse_frame_message(nlohmann::json::parse(protocol::frame_message(r)));
+	EXPECT_EQ(back.seq, 7U);
+	EXPECT_EQ(back.source, "video");
+	ASSERT_EQ(back.points.size(), 1U);
+	EXPECT_EQ(back.points[0].label, PointLabel::Uncertain);
+	EXPECT_FLOAT_EQ(back.points[0].v, 6.25F);
+	ASSERT_TRUE(back.ego.has_value());
+	EXPECT_EQ(back.ego->inliers, 99);
+	EXPECT_DOUBLE_EQ(back.ego->homography[2], 2.0);
+}
+
+TEST(Protocol, RejectsOtherVersions)
+{
+	auto j = nlohmann::json::parse(protocol::frame_message(FrameResult{}));
+	j["v"] = 99;
+	EXPECT_THROW(protocol::parse_frame_message(j), std::runtime_error);
+}
+
+TEST(Protocol, StatusMessageHasDropsAndPercentiles)
+{
+	protocol::StatusReport s;
+	s.drops = {{"ring_overflow", 3}};
+	s.capture_to_publish = summarize_ns({1'000'000, 2'000'000, 3'000'000, 4'000'000});
+	const auto j = nlohmann::json::parse(protocol::status_message(s));
+	EXPECT_EQ(j["type"], "status");
+	EXPECT_EQ(j["drops"]["ring_overflow"], 3);
+	EXPECT_DOUBLE_EQ(j["latency_ms"]["capture_to_publish"]["p50"].get<double>(), 2.0);
+	EXPECT_DOUBLE_EQ(j["latency_ms"]["capture_to_publish"]["max"].get<double>(), 4.0);
+}
+
+TEST(Latency, NearestRankPercentiles)
+{
+	std::vector<int64_t> samples;
+	for (int i = 1; i <= 100; ++i)
+		samples.push_back(i * 1'000'000);
+	const auto s = summarize_ns(samples);
+	EXPECT_DOUBLE_EQ(s.p50_ms, 50.0);
+	EXPECT_DOUBLE_EQ(s.p90_ms, 90.0);
+	EXPECT_DOUBLE_EQ(s.p99_ms, 99.0);
+	EXPECT_EQ(s.samples, 100U);
+	LatencyWindow window(10);
+	for (int i = 1; i <= 25; ++i)
+		window.add(i * 1'000'000);
+	EXPECT_EQ(window.summary().samples, 10U);
+	EXPECT_DOUBLE_EQ(window.summary().max_ms, 25.0);
+}

@@ -1,0 +1,126 @@
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+
+#include "drivers/replay/recording.hpp"
+
+using namespace stereod;
+using namespace stereod::drivers;
+namespace fs = std::filesystem;
+
+namespace
+{
+
+FrameGeometry geometry()
+{
+	return {32, 24, PixelFormat::Bgr8, true, false, true, 30};
+}
+
+void fill(StereoFrame &f, uint64_t i)
+{
+	f.sequence = i;
+	f.device_ns = static_cast<int64_t>(i) * 33'333'333;
+	f.host_ns = 1000 + static_cast<int64_t>(i);
+	f.lr_skew_ns = static_cast<int64_t>(i % 3);
+	f.status = i == 2 ? FrameStatus::Incomplete : FrameStatus::Ok;
+	f.left.setTo(cv::Scalar(static_cast<double>(i), 1, 2));
+	f.right.setTo(cv::Scalar(3, static_cast<double>(i), 4));
+	f.truth.object_ids.setTo(static_cast<double>(i % 5));
+	f.truth.object_count = 1;
+	f.truth.objects[0] = {9, {1.0, 2.0, static_cast<double>(i)}, {0.5, 0, 0}};
+}
+
+class RecordingTest : public ::testing::Test
+{
+protected:
+	void SetUp() override
+	{
+		path_ = (fs::temp_directory_path() / ("stereod-rec-" + std::to_string(::getpid()) + ".srec")).string();
+		StereoFrame frame;
+		frame.allocate(geometry());
+		RecordingWriter writer(path_, {"sim", "test", geometry(), 0});
+		for (uint64_t i = 0; i < 5; ++i) {
+			fill(frame, i);
+			writer.append(frame);
+			sizes_.push_back(writer.bytes_written());
+		}
+	}
+	void TearDown() override { fs::remove(path_); }
+
+	uint64_t read_all(RecordingReader &reader)
+	{
+		StereoFrame frame;
+		frame.allocate(reader.header().geometry);
+		uint64_t n = 0;
+		while (reader.next(frame))
+			++n;
+		return n;
+	}
+
+	std::string path_;
+	std::vector<uint64_t> sizes_; ///< file size after each frame
+};
+
+} // namespace
+
+TEST_F(RecordingTest, ReadsBackExactly)
+{
+	RecordingReader reader(path_);
+	EXPECT_EQ(reader.header().source, "sim");
+	EXPECT_EQ(reader.header().geometry, geometry());
+	StereoFrame frame, expected;
+	frame.allocate(geometry());
+	expected.allocate(geometry());
+	for (uint64_t i = 0; i < 5; ++i) {
+		ASSERT_TRUE(reader.next(frame));
+		fill(expected, i);
+		EXPECT_EQ(frame.sequence, i);
+		EXPECT_EQ(frame.device_ns, expected.device_ns);
+		EXPECT_EQ(frame.lr_skew_ns, expected.lr_skew_ns);
+		EXPECT_EQ(frame.status, expected.status);
+		EXPECT_EQ(cv::norm(frame.left, expected.left, cv::NORM_INF), 0.0);
+		EXPECT_EQ(cv::norm(frame.right, expected.right, cv::NORM_INF), 0.0);
+		EXPECT_EQ(cv::norm(frame.truth.object_ids, expected.truth.object_ids, cv::NORM_INF), 0.0);
+		ASSERT_EQ(frame.truth.object_count, 1U);
+		EXPECT_DOUBLE_EQ(frame.truth.objects[0].position_m[2], static_cast<double>(i));
+	}
+	EXPECT_FALSE(reader.next(frame));
+	EXPECT_TRUE(reader.report().clean_end);
+	EXPECT_EQ(reader.report().frames, 5U);
+}
+
+TEST_F(RecordingTest, TruncationAnywhereKeepsEveryCompleteFrame)
+{
+	// Cut inside the 4th record at several points, including inside its 12-byte record header.
+	for (uint64_t cut : {sizes_[2] + 1, sizes_[2] + 11, sizes_[2] + 100, sizes_[3] - 1}) {
+		fs::resize_file(path_, cut);
+		RecordingReader reader(path_);
+		EXPECT_EQ(read_all(reader), 3U) << "cut at " << cut;
+		EXPECT_FALSE(reader.report().clean_end);
+		EXPECT_EQ(reader.report().cut_at_offset, sizes_[2]);
+		EXPECT_EQ(reader.report().bytes_dropped, cut - sizes_[2]);
+		EXPECT_NE(reader.report().describe().find("3 complete frames recovered"), std::string::npos);
+	}
+}
+
+TEST_F(RecordingTest, ACorruptByteStopsAtThatRecord)
+{
+	{
+		std::fstream f(path_, std::ios::in | std::ios::out | std::ios::binary);
+		f.seekp(static_cast<std::streamoff>(sizes_[1] + 200));
+		f.put('\x5a');
+	}
+	RecordingReader reader(path_);
+	EXPECT_EQ(read_all(reader), 2U);
+	EXPECT_NE(reader.report().reason.find("CRC"), std::string::npos) << reader.report().reason;
+}
+
+TEST(Recording, RejectsWhatIsNotARecording)
+{
+	const auto path = (fs::temp_directory_path() / "stereod-not-a-recording.srec").string();
+	std::ofstream(path) << "hello";
+	EXPECT_THROW({ RecordingReader reader(path); }, std::runtime_error);
+	fs::remove(path);
+	EXPECT_THROW({ RecordingReader reader("/nonexistent/x.srec"); }, std::runtime_error);
+}

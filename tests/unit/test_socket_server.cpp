@@ -1,0 +1,219 @@
+// The results socket with real clients on a real Unix socket.
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <filesystem>
+#include <fstream>
+#include <sys/socket.h>
+#include <sys/stat.h>
+#include <sys/un.h>
+#include <thread>
+#include <unistd.h>
+
+#include <nlohmann/json.hpp>
+
+#include "core/clock.hpp"
+#include "daemon/socket_server.hpp"
+
+using namespace stereod;
+using namespace stereod::daemon;
+namespace fs = std::filesystem;
+
+namespace
+{
+
+std::string socket_path(const std::string &name)
+{
+	return (fs::temp_directory_path() / ("stereod-" + std::to_string(::getpid()) + "-" + name + ".sock")).string();
+}
+
+int connect_to(const std::string &path)
+{
+	const int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+	sockaddr_un addr{};
+	addr.sun_family = AF_UNIX;
+	std::strncpy(addr.sun_path, path.c_str(), sizeof(addr.sun_path) - 1);
+	EXPECT_EQ(::connect(fd, reinterpret_cast<const sockaddr *>(&addr), sizeof(addr)), 0) << std::strerror(errno);
+	timeval tv{2, 0};
+	::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof(tv));
+	return fd;
+}
+
+/// Reads lines until `count` arrived or the peer closes / times out.
+std::vector<std::string> read_lines(int fd, size_t count)
+{
+	std::vector<std::string> lines;
+	std::string buffer;
+	char chunk[4096];
+	while (lines.size() < count) {
+		const ssize_t n = ::recv(fd, chunk, sizeof(chunk), 0);
+		if (n <= 0)
+			break;
+		buffer.append(chunk, static_cast<size_t>(n));
+		size_t pos = 0;
+		while ((pos = buffer.find('\n')) != std::string::npos) {
+			lines.push_back(buffer.substr(0, pos));
+			buffer.erase(0, pos + 1);
+		}
+	}
+	return lines;
+}
+
+template <typename Predicate>
+bool eventually(Predicate p, int ms = 3000)
+{
+	for (int i = 0; i < ms / 10; ++i) {
+		if (p())
+			return true;
+		std::this_thread::sleep_for(std::chrono::milliseconds(10));
+	}
+	return p();
+}
+
+} // namespace
+
+TEST(SocketServer, EveryClientGetsEveryMessageInOrder)
+{
+	const auto path = socket_path("fanout");
+	SocketServer server({path, 0660, 1000, 4096});
+	server.set_greeting("{\"type\":\"hello\"}");
+	std::vector<int> clients = {connect_to(path), connect_to(path), connect_to(path)};
+	ASSERT_TRUE(eventually([&] { return server.stats().clients == 3; }));
+	for (int i = 0; i < 200; ++i)
+		server.publish("{\"n\":" + std::to_string(i) + "}");
+	for (int fd : clients) {
+		const auto lines = read_lines(fd, 201);
+		ASSERT_EQ(lines.size(), 201U);
+		EXPECT_EQ(lines[0], "{\"type\":\"hello\"}");
+		for (int i = 0; i < 200; ++i)
+			ASSERT_EQ(lines[static_cast<size_t>(i + 1)], "{\"n\":" + std::to_string(i) + "}");
+		::close(fd);
+	}
+}
+
+TEST(SocketServer, SocketFileHasTheConfiguredMode)
+{
+	const auto path = socket_path("mode");
+	SocketServer server({path, 0660, 10, 4096});
+	struct stat st {
+	};
+	ASSERT_EQ(::stat(path.c_str(), &st), 0);
+	EXPECT_TRUE(S_ISSOCK(st.st_mode));
+	EXPECT_EQ(st.st_mode & 0777, 0660U);
+}
+
+namespace
+{
+
+struct Received {
+	int messages = 0;	///< data messages received
+	uint64_t told_lost = 0; ///< sum of the `dropped` counts in lag messages
+	int last = -1;
+	bool in_order = true;
+};
+
+Received tally(const std::vector<std::string> &lines)
+{
+	Received r;
+	for (const auto &line : lines) {
+		const auto j = nlohmann::json::parse(line);
+		if (j.value("type", "") == "lag") {
+			r.told_lost += j["dropped"].get<uint64_t>();
+			continue;
+		}
+		const int n = j["n"].get<int>();
+		r.in_order = r.in_order && n > r.last;
+		r.last = n;
+		++r.messages;
+	}
+	return r;
+}
+
+} // namespace
+
+TEST(SocketServer, SlowClientLosesItsOldestAndIsToldNeverStallingOthers)
+{
+	const auto path = socket_path("slow");
+	SocketServer server({path, 0660, 16, 4096});
+	const int slow = connect_to(path);
+	const int fast = connect_to(path);
+	ASSERT_TRUE(eventually([&] { return server.stats().clients == 2; }));
+	// Large messages fill the slow client's socket buffer quickly; it never reads during publishing.
+	constexpr int kMessages = 2000;
+	const std::string padding(8000, 'x');
+	std::vector<std::string> fast_lines;
+	std::thread reader([&] { fast_lines = read_lines(fast, 100000); });
+	const int64_t start = monotonic_ns();
+	for (int i = 0; i < kMessages; ++i) {
+		server.publish("{\"n\":" + std::to_string(i) + ",\"pad\":\"" + padding + "\"}");
+		// About 5000 messages a second: a reader keeps up, one that never reads cannot.
+		std::this_thread::sleep_for(std::chrono::microseconds(200));
+	}
+	const double publish_ms = static_cast<double>(monotonic_ns() - start) * 1e-6;
+	EXPECT_LT(publish_ms, 5000.0) << "publish() must not wait for the slow client";
+	const auto slow_lines = read_lines(slow, 100000); // now it reads: what is queued, then the timeout
+	::shutdown(fast, SHUT_RDWR);
+	reader.join();
+
+	const Received f = tally(fast_lines), s = tally(slow_lines);
+	// Exact accounting for both: every message was either received or reported lost.
+	EXPECT_EQ(static_cast<uint64_t>(f.messages) + f.told_lost, static_cast<uint64_t>(kMessages));
+	EXPECT_EQ(static_cast<uint64_t>(s.messages) + s.told_lost, static_cast<uint64_t>(kMessages));
+	EXPECT_EQ(f.told_lost + s.told_lost, server.stats().messages_dropped);
+	EXPECT_GT(s.told_lost, 1000U) << "the client that never read lost most of them";
+	EXPECT_LT(f.told_lost, s.told_lost / 10) << "the reading client lost little or nothing";
+	EXPECT_TRUE(f.in_order && s.in_order);
+	EXPECT_EQ(s.last, kMessages - 1) << "the newest message always gets through";
+	::close(slow);
+	::close(fast);
+}
+
+TEST(SocketServer, ClientThatFloodsUsIsDroppedAndCounted)
+{
+	const auto path = socket_path("flood");
+	SocketServer server({path, 0660, 16, 1024});
+	const int bad = connect_to(path);
+	const int good = connect_to(path);
+	ASSERT_TRUE(eventually([&] { return server.stats().clients == 2; }));
+	const std::string junk(4096, 'j');
+	(void)!::send(bad, junk.data(), junk.size(), MSG_NOSIGNAL);
+	ASSERT_TRUE(eventually([&] { return server.stats().clients_dropped == 1; }));
+	EXPECT_EQ(server.stats().clients, 1U);
+	server.publish("{\"still\":1}");
+	EXPECT_EQ(read_lines(good, 1), std::vector<std::string>{"{\"still\":1}"});
+	::close(bad);
+	::close(good);
+}
+
+TEST(SocketServer, HalfClosedClientKeepsReceiving)
+{
+	const auto path = socket_path("halfclose");
+	SocketServer server({path, 0660, 16, 1024});
+	const int fd = connect_to(path);
+	ASSERT_TRUE(eventually([&] { return server.stats().clients == 1; }));
+	::shutdown(fd, SHUT_WR); // like `socat -` after its standard input ends
+	std::this_thread::sleep_for(std::chrono::milliseconds(50));
+	server.publish("{\"a\":1}");
+	EXPECT_EQ(read_lines(fd, 1), std::vector<std::string>{"{\"a\":1}"});
+	::close(fd);
+}
+
+TEST(SocketServer, ReplacesAStaleSocketButNotALiveOne)
+{
+	const auto path = socket_path("stale");
+	{
+		// A socket file nobody listens on, as a crashed daemon leaves behind.
+		const int fd = ::socket(AF_UNIX, SOCK_STREAM, 0);
+		sockaddr_un addr{};
+		addr.sun_family = AF_UNIX;
+		std::strncpy(addr.sun_path, path.c_str(), sizeof(addr.sun_path) - 1);
+		ASSERT_EQ(::bind(fd, reinterpret_cast<const sockaddr *>(&addr), sizeof(addr)), 0);
+		::close(fd);
+	}
+	SocketServer first({path, 0660, 16, 1024});
+	EXPECT_THROW(SocketServer({path, 0660, 16, 1024}), std::runtime_error);
+	const auto regular = socket_path("regular-file");
+	std::ofstream(regular) << "x";
+	EXPECT_THROW(SocketServer({regular, 0660, 16, 1024}), std::runtime_error);
+	fs::remove(regular);
+}
