@@ -7,6 +7,9 @@
 
 #include "core/vision/classifier.hpp"
 #include "core/vision/features.hpp"
+#include "core/vision/matching.hpp"
+
+#include <opencv2/features2d.hpp>
 
 using namespace stereod;
 using namespace stereod::vision;
@@ -201,4 +204,37 @@ TEST(Features, ExtractsOrbOnARealisticImage)
 	EXPECT_LE(f.keypoints.size(), 500U);
 	EXPECT_EQ(f.descriptors.rows, static_cast<int>(f.keypoints.size()));
 	EXPECT_EQ(f.colours.size(), f.keypoints.size());
+}
+
+TEST(Matching, OnePassBruteForceAgreesWithOpenCv)
+{
+	const cv::Mat a = textured_image(640, 480, 11);
+	cv::Mat b;
+	cv::warpAffine(a, b, cv::getRotationMatrix2D({320, 240}, 3.0, 1.02), a.size());
+	FeatureParams params;
+	params.max_features = 600;
+	const FrameFeatures fa = extract_features(a, params, 1), fb = extract_features(b, params, 1);
+	MatchParams mp;
+	mp.ratio = 0.8F;
+	mp.cross_check = true;
+	const auto ours = match_features(fa, fb, mp);
+	// The reference: OpenCV's knnMatch + crossCheck rules, applied the same way.
+	cv::BFMatcher bf(cv::NORM_HAMMING);
+	std::vector<std::vector<cv::DMatch>> knn;
+	bf.knnMatch(fa.descriptors, fb.descriptors, knn, 2);
+	std::vector<cv::DMatch> back;
+	bf.match(fb.descriptors, fa.descriptors, back);
+	size_t expected = 0, agree = 0;
+	for (const auto &k : knn) {
+		if (k.empty() || k[0].distance > 64 || (k.size() > 1 && k[0].distance > 0.8F * k[1].distance) ||
+		    back[static_cast<size_t>(k[0].trainIdx)].trainIdx != k[0].queryIdx)
+			continue;
+		++expected;
+		for (const auto &m : ours)
+			agree += m.prev == k[0].queryIdx && m.cur == k[0].trainIdx;
+	}
+	ASSERT_GT(expected, 100U);
+	// Ties between equal distances may be broken differently; anything beyond that is a bug.
+	EXPECT_GE(agree, expected * 98 / 100);
+	EXPECT_LE(ours.size(), expected + expected / 50);
 }
