@@ -4,8 +4,7 @@
 #include <cstdint>
 #include <ctime>
 
-namespace stereod
-{
+namespace stereod {
 
 inline int64_t monotonic_ns() noexcept
 {

@@ -1,7 +1,6 @@
 #include "core/frame.hpp"
 
-namespace stereod
-{
+namespace stereod {
 
 std::string_view to_string(PixelFormat format) noexcept
 {
@@ -65,8 +64,7 @@ void StereoFrame::reset_metadata() noexcept
 
 #include "core/spsc_ring.hpp"
 
-namespace stereod
-{
+namespace stereod {
 
 std::string_view to_string(OverflowPolicy policy) noexcept
 {

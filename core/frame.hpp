@@ -10,8 +10,7 @@
 
 #include <opencv2/core.hpp>
 
-namespace stereod
-{
+namespace stereod {
 
 enum class PixelFormat : uint8_t {
 	Mono8, ///< one 8-bit channel (CV_8UC1)

@@ -3,8 +3,7 @@
 #include <stdexcept>
 #include <utility>
 
-namespace stereod
-{
+namespace stereod {
 
 FrameHandle::FrameHandle(FrameHandle &&other) noexcept
 	: pool_(std::exchange(other.pool_, nullptr)), index_(other.index_)

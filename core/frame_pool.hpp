@@ -10,8 +10,7 @@
 
 #include "core/frame.hpp"
 
-namespace stereod
-{
+namespace stereod {
 
 class FramePool;
 

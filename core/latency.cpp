@@ -3,8 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
-namespace stereod
-{
+namespace stereod {
 
 protocol::LatencySummary summarize_ns(std::vector<int64_t> samples)
 {

@@ -5,8 +5,7 @@
 
 #include "core/protocol.hpp"
 
-namespace stereod
-{
+namespace stereod {
 
 class LatencyWindow
 {

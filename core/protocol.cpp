@@ -5,8 +5,7 @@
 
 #include <nlohmann/json.hpp>
 
-namespace stereod
-{
+namespace stereod {
 
 std::string_view to_string(PointLabel label) noexcept
 {
@@ -21,10 +20,8 @@ std::string_view to_string(PointLabel label) noexcept
 	return "uncertain";
 }
 
-namespace protocol
-{
-namespace
-{
+namespace protocol {
+namespace {
 
 using nlohmann::json;
 

@@ -9,8 +9,7 @@
 
 #include "core/result.hpp"
 
-namespace stereod::protocol
-{
+namespace stereod::protocol {
 
 inline constexpr int kVersion = 1;
 

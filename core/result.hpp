@@ -9,8 +9,7 @@
 
 #include "core/frame.hpp"
 
-namespace stereod
-{
+namespace stereod {
 
 enum class PointLabel : uint8_t {
 	Static,

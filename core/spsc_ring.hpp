@@ -14,8 +14,7 @@
 #include <string_view>
 #include <type_traits>
 
-namespace stereod
-{
+namespace stereod {
 
 enum class OverflowPolicy : uint8_t {
 	DropOldest, ///< live sources: the newest frame always gets in, the oldest queued one is evicted

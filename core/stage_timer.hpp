@@ -6,8 +6,7 @@
 #include "core/clock.hpp"
 #include "core/result.hpp"
 
-namespace stereod
-{
+namespace stereod {
 
 class StageTimer
 {

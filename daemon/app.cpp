@@ -17,10 +17,8 @@
 #include "daemon/pipeline.hpp"
 #include "daemon/socket_server.hpp"
 
-namespace stereod::daemon
-{
-namespace
-{
+namespace stereod::daemon {
+namespace {
 
 namespace fs = std::filesystem;
 

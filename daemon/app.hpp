@@ -5,8 +5,7 @@
 
 #include "daemon/config.hpp"
 
-namespace stereod::daemon
-{
+namespace stereod::daemon {
 
 /// Runs until SIGTERM/SIGINT (drains, returns 0) or until a finite source ends.
 int run_daemon(const DaemonConfig &config);

@@ -10,10 +10,8 @@
 
 #include <toml.hpp>
 
-namespace stereod::daemon
-{
-namespace
-{
+namespace stereod::daemon {
+namespace {
 
 using Value = toml::value;
 
@@ -202,6 +200,24 @@ const std::vector<Option> &options()
 		// [features]
 		o.push_back(boolean("features", "enabled", "run feature classification (seed 000)",
 				    [](DaemonConfig &c) -> bool & { return c.motion.enabled; }));
+		{
+			Option detector{"features", "detector", "orb (OpenCV) | surf (this project's SURF)", nullptr,
+					nullptr};
+			detector.set = [](const Value &v, DaemonConfig &c) {
+				const std::string name = v.is_string() ? std::string(v.as_string()) : std::string();
+				if (name == "orb")
+					c.motion.features.detector = vision::Detector::Orb;
+				else if (name == "surf")
+					c.motion.features.detector = vision::Detector::Surf;
+				else
+					throw std::invalid_argument("must be one of orb, surf");
+			};
+			detector.show = [](const DaemonConfig &c) {
+				return std::string(c.motion.features.detector == vision::Detector::Orb ? "\"orb\""
+												       : "\"surf\"");
+			};
+			o.push_back(std::move(detector));
+		}
 		o.push_back(number(
 			"features", "max_features", "ORB keypoints kept per frame",
 			[](DaemonConfig &c) -> int & { return c.motion.features.max_features; }, 16, 20000));
@@ -220,6 +236,19 @@ const std::vector<Option> &options()
 		o.push_back(number(
 			"features", "orb_fast_threshold", "FAST corner threshold",
 			[](DaemonConfig &c) -> int & { return c.motion.features.orb_fast_threshold; }, 1, 100));
+		o.push_back(number(
+			"features", "surf_hessian_threshold", "SURF: minimum det(H) of a keypoint",
+			[](DaemonConfig &c) -> double & { return c.motion.features.surf.hessian_threshold; }, 0, 1e6));
+		o.push_back(number(
+			"features", "surf_octaves", "SURF: octaves",
+			[](DaemonConfig &c) -> int & { return c.motion.features.surf.octaves; }, 1, 6));
+		o.push_back(number(
+			"features", "surf_initial_step", "SURF: sampling step of the first octave",
+			[](DaemonConfig &c) -> int & { return c.motion.features.surf.initial_step; }, 1, 4));
+		o.push_back(boolean("features", "surf_extended", "SURF: 128-d descriptors instead of 64-d",
+				    [](DaemonConfig &c) -> bool & { return c.motion.features.surf.extended; }));
+		o.push_back(boolean("features", "surf_upright", "SURF: no orientation (U-SURF), faster",
+				    [](DaemonConfig &c) -> bool & { return c.motion.features.surf.upright; }));
 		// [matching]
 		o.push_back(number(
 			"matching", "ratio", "Lowe ratio test; 1 = off",

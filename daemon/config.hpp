@@ -9,8 +9,7 @@
 #include "core/vision/motion_stages.hpp"
 #include "drivers/source.hpp"
 
-namespace stereod::daemon
-{
+namespace stereod::daemon {
 
 struct PipelineConfig {
 	int workers = 0;	       ///< 0 = one per core

@@ -6,8 +6,7 @@
 
 #include "core/clock.hpp"
 
-namespace stereod::daemon
-{
+namespace stereod::daemon {
 
 Pipeline::Pipeline(std::unique_ptr<drivers::FrameSource> source, PipelineOptions options, Sink sink)
 	: source_(std::move(source)), options_(std::move(options)), sink_(std::move(sink)),

@@ -29,8 +29,7 @@
 #include "core/vision/motion_stages.hpp"
 #include "drivers/source.hpp"
 
-namespace stereod::daemon
-{
+namespace stereod::daemon {
 
 struct PipelineOptions {
 	size_t workers = 2;

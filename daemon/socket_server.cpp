@@ -17,10 +17,8 @@
 #include "core/clock.hpp"
 #include "core/protocol.hpp"
 
-namespace stereod::daemon
-{
-namespace
-{
+namespace stereod::daemon {
+namespace {
 
 sockaddr_un address_of(const std::string &path)
 {

@@ -12,8 +12,7 @@
 #include <string>
 #include <thread>
 
-namespace stereod::daemon
-{
+namespace stereod::daemon {
 
 struct SocketServerOptions {
 	std::string path;

@@ -2,8 +2,7 @@
 
 #include "drivers/builtin.hpp"
 
-namespace stereod::drivers
-{
+namespace stereod::drivers {
 
 SourceRegistry SourceRegistry::with_builtin_drivers()
 {

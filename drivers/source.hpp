@@ -9,8 +9,7 @@
 
 #include "core/frame.hpp"
 
-namespace stereod::drivers
-{
+namespace stereod::drivers {
 
 enum class GrabStatus : uint8_t {
 	Frame,	     ///< `into` holds a new frame

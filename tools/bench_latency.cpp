@@ -13,8 +13,7 @@
 
 using namespace stereod;
 
-namespace
-{
+namespace {
 
 struct Run {
 	protocol::LatencySummary latency;

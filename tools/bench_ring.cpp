@@ -16,8 +16,7 @@
 using namespace stereod;
 using Clock = std::chrono::steady_clock;
 
-namespace
-{
+namespace {
 
 /// The naive baseline: what one writes first, a locked deque with a bound.
 class LockedQueue

@@ -7,8 +7,7 @@
 #include "core/protocol.hpp"
 #include "daemon/app.hpp"
 
-namespace stereod::tools
-{
+namespace stereod::tools {
 
 daemon::DaemonConfig load_config(const SourceOptions &options)
 {

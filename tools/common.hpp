@@ -9,8 +9,7 @@
 #include "daemon/config.hpp"
 #include "drivers/source.hpp"
 
-namespace stereod::tools
-{
+namespace stereod::tools {
 
 /// The source options every subcommand that reads frames accepts.
 struct SourceOptions {

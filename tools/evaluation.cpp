@@ -4,10 +4,8 @@
 
 #include <opencv2/imgproc.hpp>
 
-namespace stereod::tools
-{
-namespace
-{
+namespace stereod::tools {
+namespace {
 
 double ratio(uint64_t num, uint64_t den)
 {

@@ -8,8 +8,7 @@
 
 #include "core/result.hpp"
 
-namespace stereod::tools
-{
+namespace stereod::tools {
 
 struct LabelScore {
 	uint64_t frames = 0;

@@ -26,8 +26,7 @@
 using namespace stereod;
 namespace fs = std::filesystem;
 
-namespace
-{
+namespace {
 
 volatile std::sig_atomic_t g_interrupted = 0; // set by SIGINT/SIGTERM in record and watch
 

@@ -7,8 +7,7 @@
 
 #include "core/vision/features.hpp"
 
-namespace stereod::vision
-{
+namespace stereod::vision {
 
 std::optional<HomographyFit> fit_homography(std::span<const cv::Point2f> from, std::span<const cv::Point2f> to,
 					    double ransac_threshold_px, int min_points)

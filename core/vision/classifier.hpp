@@ -20,8 +20,7 @@
 
 #include "core/result.hpp"
 
-namespace stereod::vision
-{
+namespace stereod::vision {
 
 struct ClassifierParams {
 	double ransac_threshold_px = 3.0;   ///< RANSAC inlier distance for both homography fits

@@ -5,8 +5,7 @@
 #include <opencv2/features2d.hpp>
 #include <opencv2/imgproc.hpp>
 
-namespace stereod::vision
-{
+namespace stereod::vision {
 
 cv::Vec3f sample_colour(const cv::Mat &image, cv::Point2f at, int radius)
 {
@@ -75,15 +74,37 @@ FrameFeatures extract_features(const cv::Mat &image, const FeatureParams &params
 		grey = image;
 
 	FrameFeatures features;
-	// Detect three times the budget, then bucket: the grid decides which survive, not raw response.
-	auto orb = cv::ORB::create(params.max_features * 3, params.orb_scale, params.orb_levels, 31, 0, 2,
-				   cv::ORB::HARRIS_SCORE, 31, params.orb_fast_threshold);
-	std::vector<cv::KeyPoint> detected;
-	orb->detect(grey, detected);
-	features.keypoints = bucket_keypoints(std::move(detected), grey.size(), params.grid_cols, params.grid_rows,
-					      params.max_features);
-	orb->compute(grey, features.keypoints, features.descriptors);
-	features.norm_type = cv::NORM_HAMMING;
+	if (params.detector == Detector::Orb) {
+		// Detect three times the budget, then bucket: the grid decides which survive, not raw response.
+		auto orb = cv::ORB::create(params.max_features * 3, params.orb_scale, params.orb_levels, 31, 0, 2,
+					   cv::ORB::HARRIS_SCORE, 31, params.orb_fast_threshold);
+		std::vector<cv::KeyPoint> detected;
+		orb->detect(grey, detected);
+		features.keypoints = bucket_keypoints(std::move(detected), grey.size(), params.grid_cols,
+						      params.grid_rows, params.max_features);
+		orb->compute(grey, features.keypoints, features.descriptors);
+		features.norm_type = cv::NORM_HAMMING;
+	} else {
+		const cv::Mat integral = surf_integral(grey);
+		SurfParams surf = params.surf;
+		surf.max_features = params.max_features * 3;
+		const std::vector<SurfKeypoint> detected = surf_detect(integral, surf);
+		std::vector<cv::KeyPoint> candidates;
+		candidates.reserve(detected.size());
+		for (size_t i = 0; i < detected.size(); ++i) {
+			cv::KeyPoint kp = detected[i].to_cv();
+			kp.class_id = static_cast<int>(i); // back to the SURF keypoint after bucketing
+			candidates.push_back(kp);
+		}
+		std::vector<SurfKeypoint> kept;
+		for (const auto &kp : bucket_keypoints(std::move(candidates), grey.size(), params.grid_cols,
+						       params.grid_rows, params.max_features))
+			kept.push_back(detected[static_cast<size_t>(kp.class_id)]);
+		features.descriptors = surf_describe(integral, kept, surf);
+		for (const auto &kp : kept)
+			features.keypoints.push_back(kp.to_cv());
+		features.norm_type = cv::NORM_L2;
+	}
 	features.colours.reserve(features.keypoints.size());
 	for (const auto &kp : features.keypoints)
 		features.colours.push_back(sample_colour(image, kp.pt, colour_radius));

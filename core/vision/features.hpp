@@ -6,16 +6,21 @@
 
 #include <opencv2/core.hpp>
 
-namespace stereod::vision
-{
+#include "core/vision/surf.hpp"
+
+namespace stereod::vision {
+
+enum class Detector : uint8_t { Orb, Surf };
 
 struct FeatureParams {
+	Detector detector = Detector::Orb;
 	int max_features = 1000; ///< after bucketing
 	int grid_cols = 8;	 ///< the image is cut into grid_cols x grid_rows cells; each keeps its
 	int grid_rows = 6;	 ///< strongest max_features / cells points, so points cover the image
 	int orb_levels = 4;	 ///< pyramid levels (OpenCV's default 8 costs twice as much for little gain here)
 	float orb_scale = 1.2F;
 	int orb_fast_threshold = 12;
+	SurfParams surf; ///< when detector is Surf (max_features above still applies)
 };
 
 /// Keypoints and what the classifier needs of them later, so the image itself can be released.

@@ -6,10 +6,8 @@
 
 #include <opencv2/features2d.hpp>
 
-namespace stereod::vision
-{
-namespace
-{
+namespace stereod::vision {
+namespace {
 
 constexpr int kUnset = -1;
 
@@ -99,8 +97,7 @@ std::vector<Match> match_float(const cv::Mat &prev, const cv::Mat &cur, const Ma
 		if (candidates.empty())
 			continue;
 		const cv::DMatch &best = candidates[0];
-		if (best.distance > static_cast<float>(params.max_distance))
-			continue;
+		// max_distance is in Hamming bits; float descriptors rely on the ratio test and cross check.
 		if (candidates.size() > 1 && best.distance > params.ratio * candidates[1].distance)
 			continue;
 		if (params.cross_check && backward_best[static_cast<size_t>(best.trainIdx)] != best.queryIdx)

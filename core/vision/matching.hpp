@@ -4,8 +4,7 @@
 
 #include "core/vision/features.hpp"
 
-namespace stereod::vision
-{
+namespace stereod::vision {
 
 struct MatchParams {
 	float ratio = 0.8F;	 ///< Lowe's ratio test on the two nearest neighbours; 1 disables it

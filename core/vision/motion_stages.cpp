@@ -2,8 +2,7 @@
 
 #include "core/stage_timer.hpp"
 
-namespace stereod::vision
-{
+namespace stereod::vision {
 
 FrameFeatures extract_stage(const StereoFrame &frame, const MotionParams &params, std::vector<StageTime> &timing)
 {

@@ -8,8 +8,7 @@
 #include "core/vision/features.hpp"
 #include "core/vision/matching.hpp"
 
-namespace stereod::vision
-{
+namespace stereod::vision {
 
 struct MotionParams {
 	bool enabled = true;

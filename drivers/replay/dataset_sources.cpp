@@ -10,10 +10,8 @@
 #include "drivers/replay/datasets.hpp"
 #include "drivers/replay/pacer.hpp"
 
-namespace stereod::drivers
-{
-namespace
-{
+namespace stereod::drivers {
+namespace {
 
 /// Decodes `file` into the preallocated `target`, converting colour to the target's format. False if the
 /// file is unreadable or has the wrong size (the frame is then marked corrupt, the stream goes on).

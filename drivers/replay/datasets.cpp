@@ -9,10 +9,8 @@
 
 #include "drivers/source.hpp"
 
-namespace stereod::drivers::datasets
-{
-namespace
-{
+namespace stereod::drivers::datasets {
+namespace {
 
 namespace fs = std::filesystem;
 

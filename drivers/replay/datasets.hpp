@@ -5,8 +5,7 @@
 #include <string>
 #include <vector>
 
-namespace stereod::drivers::datasets
-{
+namespace stereod::drivers::datasets {
 
 struct Entry {
 	int64_t device_ns = 0;

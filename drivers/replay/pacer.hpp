@@ -8,8 +8,7 @@
 #include "core/clock.hpp"
 #include "drivers/source.hpp"
 
-namespace stereod::drivers
-{
+namespace stereod::drivers {
 
 class Pacer
 {

@@ -10,10 +10,8 @@
 #include <nlohmann/json.hpp>
 #include <zlib.h>
 
-namespace stereod::drivers
-{
-namespace
-{
+namespace stereod::drivers {
+namespace {
 
 constexpr char kMagic[8] = {'S', 'R', 'E', 'C', '\r', '\n', '\x1a', '\n'};
 constexpr uint32_t kVersion = 1;

@@ -12,8 +12,7 @@
 
 #include "core/frame.hpp"
 
-namespace stereod::drivers
-{
+namespace stereod::drivers {
 
 struct RecordingHeader {
 	std::string source; ///< driver that produced the frames

@@ -4,10 +4,8 @@
 #include "drivers/replay/pacer.hpp"
 #include "drivers/replay/recording.hpp"
 
-namespace stereod::drivers
-{
-namespace
-{
+namespace stereod::drivers {
+namespace {
 
 class ReplaySource final : public FrameSource
 {

@@ -9,10 +9,8 @@
 #include <opencv2/imgproc.hpp>
 #include <spdlog/spdlog.h>
 
-namespace stereod::drivers::sim
-{
-namespace
-{
+namespace stereod::drivers::sim {
+namespace {
 
 namespace fs = std::filesystem;
 

@@ -14,8 +14,7 @@
 #include "core/frame.hpp"
 #include "drivers/source.hpp"
 
-namespace stereod::drivers::sim
-{
+namespace stereod::drivers::sim {
 
 struct Pose {
 	cv::Matx33d r_cw; ///< camera-from-world rotation

@@ -9,10 +9,8 @@
 #include "drivers/builtin.hpp"
 #include "drivers/sim/sim_scene.hpp"
 
-namespace stereod::drivers
-{
-namespace
-{
+namespace stereod::drivers {
+namespace {
 
 class SimSource final : public FrameSource
 {

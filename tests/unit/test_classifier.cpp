@@ -14,8 +14,7 @@
 using namespace stereod;
 using namespace stereod::vision;
 
-namespace
-{
+namespace {
 
 cv::Mat textured_image(int width, int height, uint64_t seed, double blur = 3.0)
 {

@@ -10,8 +10,7 @@
 using namespace stereod::daemon;
 namespace fs = std::filesystem;
 
-namespace
-{
+namespace {
 
 std::string write_temp(const std::string &name, const std::string &text)
 {

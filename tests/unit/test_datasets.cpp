@@ -13,8 +13,7 @@ using namespace stereod;
 using namespace stereod::drivers;
 namespace fs = std::filesystem;
 
-namespace
-{
+namespace {
 
 class TempDir
 {

@@ -7,8 +7,7 @@
 
 using namespace stereod;
 
-namespace
-{
+namespace {
 FrameGeometry small_geometry()
 {
 	return {64, 48, PixelFormat::Bgr8, true, false, false, 30};

@@ -8,8 +8,7 @@
 using namespace stereod;
 using namespace stereod::daemon;
 
-namespace
-{
+namespace {
 
 std::unique_ptr<drivers::FrameSource> small_sim(uint64_t frames, bool realtime, double fps = 30)
 {

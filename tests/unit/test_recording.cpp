@@ -9,8 +9,7 @@ using namespace stereod;
 using namespace stereod::drivers;
 namespace fs = std::filesystem;
 
-namespace
-{
+namespace {
 
 FrameGeometry geometry()
 {

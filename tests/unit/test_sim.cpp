@@ -8,8 +8,7 @@
 using namespace stereod;
 using namespace stereod::drivers;
 
-namespace
-{
+namespace {
 
 std::unique_ptr<FrameSource> make_sim(uint64_t seed, const std::string &scene = "default", bool depth = false)
 {

@@ -19,8 +19,7 @@ using namespace stereod;
 using namespace stereod::daemon;
 namespace fs = std::filesystem;
 
-namespace
-{
+namespace {
 
 std::string socket_path(const std::string &name)
 {
@@ -102,8 +101,7 @@ TEST(SocketServer, SocketFileHasTheConfiguredMode)
 	EXPECT_EQ(st.st_mode & 0777, 0660U);
 }
 
-namespace
-{
+namespace {
 
 struct Received {
 	int messages = 0;	///< data messages received
