@@ -57,7 +57,7 @@ test)
 
 	section "TSan build: the concurrent parts (ring, pool, pipeline, socket)"
 	build build-tsan "${SANITIZER_FLAGS[@]}" -DSTEREOD_WERROR=ON -DSTEREOD_SANITIZE=thread -DSTEREOD_TOOLS=OFF
-	(cd build-tsan && TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1" \
+	(cd build-tsan && TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1 suppressions=$ROOT/tests/tsan.supp" \
 		ctest -j "$JOBS" --output-on-failure --timeout 900 -R 'SpscRing|FramePool|Pipeline|SocketServer')
 
 	section "done in $(($(date +%s) - START)) s"

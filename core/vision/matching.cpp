@@ -11,20 +11,49 @@ namespace {
 
 constexpr int kUnset = -1;
 
-/// Hamming distance of two 256-bit ORB descriptors. Compiled twice: with the popcnt instruction where the
-/// CPU has it (chosen at load time) and portably otherwise, so one binary runs on any x86-64 or ARM board.
-#if defined(__x86_64__) && defined(__GNUC__)
-__attribute__((target_clones("popcnt", "default")))
-#endif
-void hamming_rows(const uint64_t *query, const uint64_t *train, int train_rows, int words, int *out)
+/// Hamming distances of one descriptor to a block of descriptors. Two builds of the same loop: one with
+/// the popcnt instruction for CPUs that have it, a portable one otherwise, chosen once at run time, so one
+/// binary runs on any x86-64 or ARM board. (Not an ifunc: sanitizer runtimes cannot run ifunc resolvers.)
+template <typename Word>
+inline void hamming_rows_generic(const Word *query, const Word *train, int train_rows, int words, int *out)
 {
 	for (int j = 0; j < train_rows; ++j) {
-		const uint64_t *t = train + static_cast<ptrdiff_t>(j) * words;
+		const Word *t = train + static_cast<ptrdiff_t>(j) * words;
 		int d = 0;
 		for (int w = 0; w < words; ++w)
 			d += std::popcount(query[w] ^ t[w]);
 		out[j] = d;
 	}
+}
+
+void hamming_rows_portable(const uint64_t *query, const uint64_t *train, int train_rows, int words, int *out)
+{
+	hamming_rows_generic(query, train, train_rows, words, out);
+}
+
+#if defined(__x86_64__) && defined(__GNUC__)
+__attribute__((target("popcnt"))) void hamming_rows_popcnt(const uint64_t *query, const uint64_t *train, int train_rows,
+							   int words, int *out)
+{
+	hamming_rows_generic(query, train, train_rows, words, out);
+}
+#endif
+
+using HammingRows = void (*)(const uint64_t *, const uint64_t *, int, int, int *);
+
+HammingRows select_hamming_rows()
+{
+#if defined(__x86_64__) && defined(__GNUC__)
+	if (__builtin_cpu_supports("popcnt"))
+		return hamming_rows_popcnt;
+#endif
+	return hamming_rows_portable;
+}
+
+void hamming_rows(const uint64_t *query, const uint64_t *train, int train_rows, int words, int *out)
+{
+	static const HammingRows chosen = select_hamming_rows();
+	chosen(query, train, train_rows, words, out);
 }
 
 /// Brute force in one pass over the distance matrix: each query row's two nearest (for the ratio test) and
