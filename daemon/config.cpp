@@ -301,6 +301,9 @@ const std::vector<Option> &options()
 			"classifier", "texture_threshold", "T of eqs. 2 and 7, 8-bit units",
 			[](DaemonConfig &c) -> double & { return c.motion.classifier.texture_threshold; }, 0, 255));
 		o.push_back(number(
+			"classifier", "texture_tolerance_px", "eq. 3 compares the best match within this many px",
+			[](DaemonConfig &c) -> int & { return c.motion.classifier.texture_tolerance_px; }, 0, 5));
+		o.push_back(number(
 			"classifier", "colour_radius", "colours are means of (2r+1)^2 pixels (eqs. 3, 6)",
 			[](DaemonConfig &c) -> int & { return c.motion.classifier.colour_radius; }, 0, 10));
 		o.push_back(number(

@@ -229,6 +229,8 @@ int eval(const std::string &results_path, const std::string &truth_dir, const st
 					      {"f1", s.f1()},
 					      {"static_error_rate", s.static_error_rate()},
 					      {"uncertain_rate", s.uncertain_rate()},
+					      {"uncertain_on_movers", s.uncertain_on_mover},
+					      {"uncertain_on_scene", s.uncertain_on_scene},
 					      {"mean_coverage", s.mean_coverage()}};
 		};
 		std::cout << nlohmann::json{{"name", name},

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include <opencv2/calib3d.hpp>
 
@@ -82,6 +83,22 @@ double texture_distance(const cv::Vec3f &a, const cv::Vec3f &b, const Classifier
 	       params.gamma * std::abs(static_cast<double>(a[0] - b[0]));
 }
 
+double texture_distance_near(const cv::Vec3f &colour, const cv::Mat &image, cv::Point2f at,
+			     const ClassifierParams &params)
+{
+	const int t = params.texture_tolerance_px;
+	double best = std::numeric_limits<double>::infinity();
+	for (int dy = -t; dy <= t; ++dy)
+		for (int dx = -t; dx <= t; ++dx)
+			best = std::min(best, texture_distance(colour,
+							       sample_colour(image,
+									     at + cv::Point2f(static_cast<float>(dx),
+											      static_cast<float>(dy)),
+									     params.colour_radius),
+							       params));
+	return best;
+}
+
 Classification classify(std::span<const PointPair> pairs, const cv::Mat &cur_image, const ClassifierParams &params)
 {
 	Classification out;
@@ -122,7 +139,8 @@ Classification classify(std::span<const PointPair> pairs, const cv::Mat &cur_ima
 
 	// 4. Static texture constraint (eqs. 2-4): the two ends of a static match look alike.
 	auto same_texture = [&](size_t i) {
-		return texture_distance(pairs[i].prev_colour, pairs[i].cur_colour, params) < params.texture_threshold;
+		return texture_distance_near(pairs[i].prev_colour, cur_image, pairs[i].cur, params) <
+		       params.texture_threshold;
 	};
 	std::erase_if(static_set, [&](size_t i) { return !same_texture(i); });
 	out.counts.static_after_texture = static_cast<int>(static_set.size());

@@ -36,6 +36,7 @@ struct ClassifierParams {
 	double beta = 0.587;		      ///< eq. 3 weight of G
 	double gamma = 0.114;		      ///< eq. 3 weight of B (alpha + beta + gamma = 1, eq. 4)
 	double texture_threshold = 12.0;      ///< T, in 8-bit intensity units
+	int texture_tolerance_px = 1;	      ///< eq. 3 takes the best match within this many pixels of the point
 	int colour_radius = 1;		      ///< patch radius for colours sampled at projected points
 	int min_matches = 12;		      ///< fewer matches: no homography, everything Uncertain
 };
@@ -79,6 +80,12 @@ AreaWindow area_window(std::span<const cv::Point2f> displacements, double theta,
 
 /// Eq. 3: alpha|dR| + beta|dG| + gamma|dB| between two B,G,R colours.
 double texture_distance(const cv::Vec3f &a, const cv::Vec3f &b, const ClassifierParams &params);
+
+/// Eq. 3 between a colour and the image around `at`, the smallest over positions within
+/// texture_tolerance_px: keypoints are located to about a pixel, and at a corner (where detectors put them)
+/// a one-pixel shift changes the colour by tens of levels, which would fail a static point.
+double texture_distance_near(const cv::Vec3f &colour, const cv::Mat &image, cv::Point2f at,
+			     const ClassifierParams &params);
 
 struct ClassificationCounts {
 	int matches = 0;
