@@ -4,6 +4,7 @@
 #include <functional>
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -50,12 +51,19 @@ struct SourceConfig {
 	SimConfig sim;
 };
 
+/// Rectified pinhole stereo calibration, where the source knows it (sim, KITTI's calib files).
+struct StereoCalibration {
+	double fx = 0, fy = 0, cx = 0, cy = 0; ///< left camera, pixels
+	double baseline_m = 0;		       ///< right camera's offset along the left camera's x axis
+};
+
 struct SourceInfo {
 	std::string name;	 ///< driver name, e.g. "sim", "kitti"
 	std::string description; ///< human-readable: what is being played
 	FrameGeometry geometry;
 	bool live = false;	  ///< frames arrive whether or not we take them (drop-oldest applies)
 	uint64_t frame_count = 0; ///< known length of a finite source, 0 if unknown
+	std::optional<StereoCalibration> calibration;
 };
 
 class FrameSource

@@ -315,8 +315,12 @@ cv::Mat plot(const std::map<uint64_t, FrameResult> &results)
 	bool have_prev = false;
 	for (const auto &[seq, r] : results) {
 		int s = 0, d = 0;
-		for (const auto &p : r.points)
-			(p.label == PointLabel::Static ? s : p.label == PointLabel::Dynamic ? d : s += 0);
+		for (const auto &p : r.points) {
+			if (p.label == PointLabel::Static)
+				++s;
+			else if (p.label == PointLabel::Dynamic)
+				++d;
+		}
 		const double x = x_of(static_cast<double>(seq));
 		const cv::Point2d ps(x, top1 + height1 - static_cast<double>(s) / max_count * height1);
 		const cv::Point2d pd(x, top1 + height1 - static_cast<double>(d) / max_count * height1);

@@ -53,6 +53,7 @@ public:
 		}
 		info_.live = false;
 		info_.frame_count = index_.entries.size();
+		info_.calibration = index_.calibration;
 	}
 
 	const SourceInfo &info() const override { return info_; }

@@ -5,6 +5,7 @@
 #include <ctime>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <sstream>
 
 #include "drivers/source.hpp"
@@ -171,6 +172,39 @@ int64_t parse_kitti_timestamp(const std::string &text)
 	return static_cast<int64_t>(timegm(&tm)) * 1'000'000'000 + seconds_to_ns(seconds);
 }
 
+StereoCalibration parse_kitti_calibration(const std::string &file)
+{
+	std::ifstream in(file);
+	if (!in)
+		throw SourceError("kitti: cannot read " + file);
+	std::map<std::string, std::vector<double>> values;
+	std::string line;
+	while (std::getline(in, line)) {
+		const auto colon = line.find(':');
+		if (colon == std::string::npos)
+			continue;
+		std::istringstream numbers(line.substr(colon + 1));
+		std::vector<double> v;
+		double x = 0;
+		while (numbers >> x)
+			v.push_back(x);
+		values[trim(line.substr(0, colon))] = v;
+	}
+	const auto p2 = values.find("P_rect_02"), p3 = values.find("P_rect_03");
+	if (p2 == values.end() || p3 == values.end() || p2->second.size() != 12 || p3->second.size() != 12)
+		throw SourceError("kitti: " + file + " lacks P_rect_02/P_rect_03 (12 numbers each)");
+	const auto &a = p2->second, &b = p3->second;
+	StereoCalibration c;
+	c.fx = a[0];
+	c.cx = a[2];
+	c.fy = a[5];
+	c.cy = a[6];
+	// P_rect = K [I | t] with t_x = -baseline * fx relative to camera 0: the 02 -> 03 baseline is the
+	// difference of the two translations.
+	c.baseline_m = (a[3] - b[3]) / a[0];
+	return c;
+}
+
 Index kitti(const std::string &drive_dir)
 {
 	const fs::path root(drive_dir);
@@ -213,6 +247,15 @@ Index kitti(const std::string &drive_dir)
 					 left_files[i].string(),
 					 right_files[i].string(),
 					 {}});
+	for (const fs::path &calib : {root / "calib_cam_to_cam.txt", root.parent_path() / "calib_cam_to_cam.txt"}) {
+		std::error_code ec;
+		if (fs::exists(calib, ec)) {
+			index.calibration = parse_kitti_calibration(calib.string());
+			break;
+		}
+	}
+	if (!index.calibration)
+		index.notes.push_back("kitti: no calib_cam_to_cam.txt beside the drive; no calibration");
 	return index;
 }
 

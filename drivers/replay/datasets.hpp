@@ -2,8 +2,11 @@
 // Readers of public dataset layouts and plain folders/videos. Each builds a list of timestamped image
 // files (the index) without decoding anything, so its parsing can be tested on small fixtures.
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
+
+#include "drivers/source.hpp"
 
 namespace stereod::drivers::datasets {
 
@@ -17,12 +20,16 @@ struct Entry {
 
 struct Index {
 	std::vector<Entry> entries;
+	std::optional<StereoCalibration> calibration;
 	double depth_scale = 5000.0;	///< raw depth units per metre
 	std::vector<std::string> notes; ///< what the reader noticed (skipped lines, unmatched frames)
 };
 
-/// KITTI raw drive folder: image_02/ and image_03/ with data/*.png and timestamps.txt.
+/// KITTI raw drive folder: image_02/ and image_03/ with data/*.png and timestamps.txt; the rectified
+/// calibration from calib_cam_to_cam.txt in the drive folder or its parent (the date folder), if present.
 Index kitti(const std::string &drive_dir);
+/// P_rect_02 and P_rect_03 of a KITTI calib_cam_to_cam.txt -> intrinsics and baseline. Throws on bad input.
+StereoCalibration parse_kitti_calibration(const std::string &file);
 /// EuRoC / ASL: mav0/cam0 and mav0/cam1, each data.csv + data/*.png, paired by timestamp.
 Index euroc(const std::string &sequence_dir);
 /// TUM RGB-D: rgb.txt and depth.txt, associated by nearest timestamp within max_difference_s.

@@ -26,6 +26,8 @@ public:
 				  config_.depth, true,		 config_.fps};
 		info_.live = realtime_;
 		info_.frame_count = config_.frames;
+		const auto &k = scene_.intrinsics();
+		info_.calibration = StereoCalibration{k.fx, k.fy, k.cx, k.cy, config_.baseline_m};
 
 		// Sensor noise: a few frames of Gaussian noise drawn once, applied at a random row offset each
 		// frame, so it looks fresh every frame without the cost of drawing it.

@@ -5,6 +5,7 @@
 #include <fstream>
 
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/videoio.hpp>
 
 #include "drivers/replay/datasets.hpp"
 #include "drivers/source.hpp"
@@ -67,8 +68,17 @@ TEST(Datasets, KittiRawDrive)
 			       << (std::string(cam) == "image_02" ? "100000000" : "100000500") << "\n";
 		}
 	}
+	std::ofstream(dir.path() / "calib_cam_to_cam.txt")
+		<< "calib_time: 09-Jan-2012 13:57:47\n"
+		<< "P_rect_02: 7.215377e+02 0.000000e+00 6.095593e+02 4.485728e+01 0.000000e+00 7.215377e+02 "
+		   "1.728540e+02 2.163791e-01 0.000000e+00 0.000000e+00 1.000000e+00 2.745884e-03\n"
+		<< "P_rect_03: 7.215377e+02 0.000000e+00 6.095593e+02 -3.395242e+02 0.000000e+00 7.215377e+02 "
+		   "1.728540e+02 2.199936e+00 0.000000e+00 0.000000e+00 1.000000e+00 2.729905e-03\n";
 	auto source = open("kitti", dir.path());
 	EXPECT_TRUE(source->info().geometry.stereo);
+	ASSERT_TRUE(source->info().calibration.has_value());
+	EXPECT_DOUBLE_EQ(source->info().calibration->fx, 721.5377);
+	EXPECT_NEAR(source->info().calibration->baseline_m, 0.532, 0.001) << "KITTI's colour cameras: 0.54 m nominal";
 	StereoFrame frame;
 	frame.allocate(source->info().geometry);
 	int64_t previous = 0;
@@ -200,4 +210,26 @@ TEST(Datasets, MissingFolderNamesThePath)
 	} catch (const SourceError &e) {
 		EXPECT_NE(std::string(e.what()).find("/nonexistent/tum-seq"), std::string::npos);
 	}
+}
+
+TEST(Datasets, VideoFileTimestampsFollowTheFrameRate)
+{
+	TempDir dir;
+	const std::string path = (dir.path() / "clip.avi").string();
+	{
+		cv::VideoWriter writer(path, cv::VideoWriter::fourcc('M', 'J', 'P', 'G'), 12.5, cv::Size(64, 48));
+		ASSERT_TRUE(writer.isOpened());
+		for (int i = 0; i < 6; ++i)
+			writer.write(cv::Mat(48, 64, CV_8UC3, cv::Scalar(20 * i, 0, 0)));
+	}
+	auto source = open("video", dir.path() / "clip.avi");
+	EXPECT_FALSE(source->info().geometry.stereo);
+	StereoFrame frame;
+	frame.allocate(source->info().geometry);
+	std::vector<int64_t> stamps;
+	while (source->grab(frame) == GrabStatus::Frame)
+		stamps.push_back(frame.device_ns);
+	ASSERT_EQ(stamps.size(), 6U);
+	for (size_t i = 0; i < stamps.size(); ++i)
+		EXPECT_EQ(stamps[i], static_cast<int64_t>(i) * 80'000'000) << "12.5 fps -> 80 ms apart";
 }
