@@ -159,10 +159,28 @@ private:
 	template <typename Ready>
 	void wait_for_change(Ready ready)
 	{
+		// Spin briefly first: the other side usually acts within a microsecond or two, and sleeping in
+		// the kernel (and being woken) costs more than that.
+		for (int i = 0; i < kSpinsBeforeSleep; ++i) {
+			if (ready())
+				return;
+			cpu_relax();
+		}
 		const uint32_t seen = events_.load(std::memory_order_acquire);
 		if (!ready())
 			events_.wait(seen, std::memory_order_acquire);
 	}
+
+	static void cpu_relax() noexcept
+	{
+#if defined(__x86_64__) || defined(__i386__)
+		__builtin_ia32_pause();
+#elif defined(__aarch64__) || defined(__arm__)
+		asm volatile("yield" ::: "memory");
+#endif
+	}
+
+	static constexpr int kSpinsBeforeSleep = 2000;
 
 	const size_t capacity_;
 	const OverflowPolicy policy_;

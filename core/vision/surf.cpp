@@ -144,42 +144,73 @@ bool interpolate(const ResponseLayer &b, const ResponseLayer &m, const ResponseL
 	return true;
 }
 
+/// Gaussian weights of the orientation samples (sigma 2s on the 13x13 grid) and of the descriptor samples
+/// (sigma 3.3s on the 20x20 grid): fixed in units of s, so computed once.
+struct SurfWeights {
+	std::array<float, 13 * 13> orientation{};
+	std::array<float, 20 * 20> descriptor{};
+	SurfWeights()
+	{
+		for (int i = -6; i <= 6; ++i)
+			for (int j = -6; j <= 6; ++j)
+				orientation[static_cast<size_t>((i + 6) * 13 + (j + 6))] =
+					std::exp(-static_cast<float>(i * i + j * j) / (2.0F * 2.0F * 2.0F));
+		for (int i = -10; i < 10; ++i)
+			for (int j = -10; j < 10; ++j) {
+				const float u = static_cast<float>(i) + 0.5F, v = static_cast<float>(j) + 0.5F;
+				descriptor[static_cast<size_t>((i + 10) * 20 + (j + 10))] =
+					std::exp(-(u * u + v * v) / (2.0F * 3.3F * 3.3F));
+			}
+	}
+};
+
+const SurfWeights &weights()
+{
+	static const SurfWeights w;
+	return w;
+}
+
 float orientation(const Integral &integral, const SurfKeypoint &kp)
 {
 	const int s = std::max(1, static_cast<int>(std::lround(kp.scale)));
 	const int row = static_cast<int>(std::lround(kp.pt.y)), col = static_cast<int>(std::lround(kp.pt.x));
-	std::array<float, 113> angle{}, rx{}, ry{};
+	struct Sample {
+		float angle, dx, dy;
+	};
+	std::array<Sample, 113> samples{};
 	size_t n = 0;
 	for (int i = -6; i <= 6; ++i)
 		for (int j = -6; j <= 6; ++j) {
 			if (i * i + j * j >= 36)
 				continue;
-			const float w = std::exp(-static_cast<float>(i * i + j * j) / (2.0F * 2.0F * 2.0F)); // sigma 2s
+			const float w = weights().orientation[static_cast<size_t>((i + 6) * 13 + (j + 6))];
 			const float dx = w * integral.haar_x(row + j * s, col + i * s, 4 * s);
 			const float dy = w * integral.haar_y(row + j * s, col + i * s, 4 * s);
-			rx[n] = dx;
-			ry[n] = dy;
-			angle[n] = std::atan2(dy, dx);
-			++n;
+			samples[n++] = {std::atan2(dy, dx), dx, dy};
 		}
-	constexpr float kPi = std::numbers::pi_v<float>;
-	float best = -1, best_angle = 0;
-	for (float start = -kPi; start < kPi; start += 0.15F) {
-		float sx = 0, sy = 0;
-		for (size_t k = 0; k < n; ++k) {
-			float d = angle[k] - start;
-			if (d < 0)
-				d += 2 * kPi;
-			if (d < kPi / 3) {
-				sx += rx[k];
-				sy += ry[k];
-			}
+	// A window of pi/3 swept around the circle: with the samples sorted by angle, each window is a run of
+	// consecutive samples (wrapping), so the sums update as the window's ends move.
+	std::sort(samples.begin(), samples.begin() + static_cast<std::ptrdiff_t>(n),
+		  [](const Sample &a, const Sample &b) { return a.angle < b.angle; });
+	constexpr float kPi = std::numbers::pi_v<float>, kWindow = kPi / 3;
+	float best = -1, best_angle = 0, sx = 0, sy = 0;
+	size_t end = 0; // samples [start, end) (indices modulo n, angles unwrapped) are in the window
+	auto angle_at = [&](size_t k) { return samples[k % n].angle + (k >= n ? 2 * kPi : 0.0F); };
+	for (size_t start = 0; start < n; ++start) {
+		if (end < start)
+			end = start;
+		while (end < start + n && angle_at(end) < samples[start].angle + kWindow) {
+			sx += samples[end % n].dx;
+			sy += samples[end % n].dy;
+			++end;
 		}
 		const float magnitude = sx * sx + sy * sy;
 		if (magnitude > best) {
 			best = magnitude;
 			best_angle = std::atan2(sy, sx);
 		}
+		sx -= samples[start].dx; // the window moves past this sample
+		sy -= samples[start].dy;
 	}
 	return best_angle;
 }
@@ -196,7 +227,7 @@ void describe(const Integral &integral, const SurfKeypoint &kp, bool extended, f
 			const float u = static_cast<float>(i) + 0.5F, v = static_cast<float>(j) + 0.5F;
 			const int px = static_cast<int>(std::lround(kp.pt.x + s * (co * u - si * v)));
 			const int py = static_cast<int>(std::lround(kp.pt.y + s * (si * u + co * v)));
-			const float w = std::exp(-(u * u + v * v) / (2.0F * 3.3F * 3.3F));
+			const float w = weights().descriptor[static_cast<size_t>((i + 10) * 20 + (j + 10))];
 			const float dx = integral.haar_x(py, px, haar), dy = integral.haar_y(py, px, haar);
 			const float du = w * (dx * co + dy * si);
 			const float dv = w * (-dx * si + dy * co);
