@@ -119,26 +119,20 @@ int main(int argc, char **argv)
 		}
 		return b;
 	};
-	row("SpscRing, block (offline policy)", count, best([&] {
-		    SpscRing<uint32_t> ring(capacity, OverflowPolicy::Block);
-		    uint32_t evicted = 0;
-		    return run(
-			    count,
-			    [&](uint32_t v) {
-				    return ring.push(v, evicted) != SpscRing<uint32_t>::PushResult::PushedEvicted;
-			    },
-			    [&] { return ring.pop(); }, [&] { ring.close(); });
-	    }));
-	row("SpscRing, drop-oldest (live policy)", count, best([&] {
-		    SpscRing<uint32_t> ring(capacity, OverflowPolicy::DropOldest);
-		    uint32_t evicted = 0;
-		    return run(
-			    count,
-			    [&](uint32_t v) {
-				    return ring.push(v, evicted) != SpscRing<uint32_t>::PushResult::PushedEvicted;
-			    },
-			    [&] { return ring.pop(); }, [&] { ring.close(); });
-	    }));
+	auto ring_run = [&](OverflowPolicy policy) {
+		return [&, policy] {
+			SpscRing<uint32_t> ring(capacity, policy);
+			uint32_t evicted = 0;
+			return run(
+				count,
+				[&](uint32_t v) {
+					return ring.push(v, evicted) != SpscRing<uint32_t>::PushResult::PushedEvicted;
+				},
+				[&] { return ring.pop(); }, [&] { ring.close(); });
+		};
+	};
+	row("SpscRing, block (offline policy)", count, best(ring_run(OverflowPolicy::Block)));
+	row("SpscRing, drop-oldest (live policy)", count, best(ring_run(OverflowPolicy::DropOldest)));
 	row("baseline: mutex + condvar deque", count, best([&] {
 		    LockedQueue q(capacity);
 		    return run(

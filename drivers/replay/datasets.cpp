@@ -72,10 +72,12 @@ struct Stamped {
 	std::string file;
 };
 
-/// "timestamp filename" lines (TUM), '#' comments.
-std::vector<Stamped> read_tum_list(const fs::path &list, const fs::path &base, Index &index)
+/// Calls parse(line, out) for each non-empty line not starting with '#'; a line parse() rejects (by
+/// throwing) is skipped and noted with its file and line number.
+template <typename Parse>
+std::vector<Stamped> read_stamped_lines(const fs::path &file, const std::string &layout, Index &index, Parse parse)
 {
-	auto in = open_text(list, "tum");
+	auto in = open_text(file, layout);
 	std::vector<Stamped> out;
 	std::string line;
 	int number = 0;
@@ -84,48 +86,37 @@ std::vector<Stamped> read_tum_list(const fs::path &list, const fs::path &base, I
 		line = trim(line);
 		if (line.empty() || line[0] == '#')
 			continue;
-		std::istringstream fields(line);
-		std::string stamp, file;
-		if (!(fields >> stamp >> file)) {
-			index.notes.push_back(list.string() + ":" + std::to_string(number) +
-					      ": skipped malformed line");
-			continue;
-		}
 		try {
-			out.push_back({seconds_to_ns(stamp), (base / file).string()});
-		} catch (const std::exception &) {
-			index.notes.push_back(list.string() + ":" + std::to_string(number) + ": bad timestamp");
+			out.push_back(parse(line));
+		} catch (const std::exception &e) {
+			index.notes.push_back(file.string() + ":" + std::to_string(number) + ": skipped: " + e.what());
 		}
 	}
 	return out;
 }
 
+/// "timestamp filename" lines (TUM).
+std::vector<Stamped> read_tum_list(const fs::path &list, const fs::path &base, Index &index)
+{
+	return read_stamped_lines(list, "tum", index, [&](const std::string &line) {
+		std::istringstream fields(line);
+		std::string stamp, file;
+		if (!(fields >> stamp >> file))
+			throw std::runtime_error("expected 'timestamp filename'");
+		return Stamped{seconds_to_ns(stamp), (base / file).string()};
+	});
+}
+
 /// EuRoC data.csv: "#timestamp [ns],filename".
 std::vector<Stamped> read_euroc_csv(const fs::path &cam_dir, Index &index)
 {
-	const fs::path csv = cam_dir / "data.csv";
-	auto in = open_text(csv, "euroc");
-	std::vector<Stamped> out;
-	std::string line;
-	int number = 0;
-	while (std::getline(in, line)) {
-		++number;
-		line = trim(line);
-		if (line.empty() || line[0] == '#')
-			continue;
+	return read_stamped_lines(cam_dir / "data.csv", "euroc", index, [&](const std::string &line) {
 		const auto comma = line.find(',');
-		if (comma == std::string::npos) {
-			index.notes.push_back(csv.string() + ":" + std::to_string(number) + ": skipped malformed line");
-			continue;
-		}
-		try {
-			out.push_back({std::stoll(line.substr(0, comma)),
-				       (cam_dir / "data" / trim(line.substr(comma + 1))).string()});
-		} catch (const std::exception &) {
-			index.notes.push_back(csv.string() + ":" + std::to_string(number) + ": bad timestamp");
-		}
-	}
-	return out;
+		if (comma == std::string::npos)
+			throw std::runtime_error("expected 'timestamp,filename'");
+		return Stamped{std::stoll(line.substr(0, comma)),
+			       (cam_dir / "data" / trim(line.substr(comma + 1))).string()};
+	});
 }
 
 /// For each of `a`, the nearest of `b` within max_ns, each of `b` used once (TUM's associate.py rule).
