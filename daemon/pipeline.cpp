@@ -99,7 +99,8 @@ void Pipeline::capture_loop()
 			status = source_->grab(target);
 		} catch (const std::exception &e) {
 			spdlog::error("capture: {}: {}", source_name_, e.what());
-			status = drivers::GrabStatus::Lost;
+			// A live device may come back; a file that fails to read will not, so its stream ends here.
+			status = live ? drivers::GrabStatus::Lost : drivers::GrabStatus::EndOfStream;
 		}
 		if (status == drivers::GrabStatus::EndOfStream)
 			break;
