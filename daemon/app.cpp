@@ -198,7 +198,6 @@ int run_daemon(const DaemonConfig &config)
 		server.publish(protocol::status_message(report));
 		return report;
 	};
-	int exit_code = 0;
 	for (;;) {
 		const int sig = wait_signal(signals, tick_s);
 		if (sig == SIGTERM || sig == SIGINT) {
@@ -236,7 +235,7 @@ int run_daemon(const DaemonConfig &config)
 	const auto final_stats = pipeline.stats();
 	spdlog::info("stopped: {} frames captured, {} published", final_stats.frames_captured,
 		     final_stats.frames_published);
-	return exit_code;
+	return 0;
 }
 
 int run_batch(DaemonConfig config, const BatchOptions &options)
