@@ -9,8 +9,7 @@
 namespace stereod::daemon {
 
 Pipeline::Pipeline(std::unique_ptr<drivers::FrameSource> source, PipelineOptions options, Sink sink)
-	: source_(std::move(source)), options_(std::move(options)), sink_(std::move(sink)),
-	  source_name_(source_->info().name),
+	: source_(std::move(source)), options_(options), sink_(std::move(sink)), source_name_(source_->info().name),
 	  // Enough frames for a full ring, a full job queue, one per worker and the one being captured.
 	  pool_(options_.ring_capacity + 2 * options_.workers + options_.workers + 2, source_->info().geometry),
 	  ring_(options_.ring_capacity, options_.overflow), jobs_capacity_(2 * options_.workers),

@@ -175,7 +175,8 @@ RecordingReader::RecordingReader(const std::string &path) : path_(path)
 
 	char magic[sizeof(kMagic)];
 	uint32_t fields[2];
-	if (std::fread(magic, 1, sizeof(magic), file_) != sizeof(magic) || std::memcmp(magic, kMagic, sizeof(kMagic)))
+	if (std::fread(magic, 1, sizeof(magic), file_) != sizeof(magic) ||
+	    std::memcmp(magic, kMagic, sizeof(kMagic)) != 0)
 		throw std::runtime_error(path + ": not a stereod recording (bad magic)");
 	if (std::fread(fields, sizeof(uint32_t), 2, file_) != 2)
 		throw std::runtime_error(path + ": recording header is cut short");
