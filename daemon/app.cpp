@@ -65,10 +65,10 @@ PipelineOptions pipeline_options(const DaemonConfig &config, bool live)
 	return options;
 }
 
-protocol::StatusReport make_status(const Pipeline &pipeline, const SocketServerStats *server, int64_t start_ns,
-				   double capture_fps, double publish_fps)
+/// One status message from one snapshot of each component's counters, so its numbers agree with each other.
+protocol::StatusReport make_status(const Pipeline &pipeline, const PipelineStats &s, const SocketServerStats &server,
+				   int64_t start_ns, double capture_fps, double publish_fps)
 {
-	const PipelineStats s = pipeline.stats();
 	protocol::StatusReport report;
 	report.t_host_ns = monotonic_ns();
 	report.uptime_s = static_cast<double>(report.t_host_ns - start_ns) * 1e-9;
@@ -83,11 +83,9 @@ protocol::StatusReport make_status(const Pipeline &pipeline, const SocketServerS
 			{"source_gap", s.source_gaps},
 			{"corrupt", s.corrupt},
 			{"processing_error", s.processing_errors}};
-	if (server) {
-		report.drops["client_queue"] = server->messages_dropped;
-		report.drops["clients_dropped"] = server->clients_dropped;
-		report.clients = server->clients;
-	}
+	report.drops["client_queue"] = server.messages_dropped;
+	report.drops["clients_dropped"] = server.clients_dropped;
+	report.clients = server.clients;
 	report.capture_to_publish = s.capture_to_publish;
 	return report;
 }
@@ -194,7 +192,7 @@ int run_daemon(const DaemonConfig &config)
 		const SocketServerStats server_stats = server.stats();
 		const PipelineStats s = pipeline.stats();
 		const auto [capture_fps, publish_fps] = meter.update(s.frames_captured, s.frames_published);
-		const auto report = make_status(pipeline, &server_stats, start_ns, capture_fps, publish_fps);
+		const auto report = make_status(pipeline, s, server_stats, start_ns, capture_fps, publish_fps);
 		server.publish(protocol::status_message(report));
 		return report;
 	};

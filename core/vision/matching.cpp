@@ -61,10 +61,10 @@ void hamming_rows(const uint64_t *query, const uint64_t *train, int train_rows, 
 std::vector<Match> match_binary(const cv::Mat &prev, const cv::Mat &cur, const MatchParams &params)
 {
 	const int words = prev.cols / 8;
-	// Descriptors as 64-bit words; copied when a row is not a whole number of words.
-	cv::Mat prev_words, cur_words;
-	prev.copyTo(prev_words);
-	cur.copyTo(cur_words);
+	// Rows are read as 64-bit words (the caller checked cols % 8 == 0); OpenCV's row starts are 8-byte
+	// aligned for such widths, so only a non-continuous view needs copying.
+	const cv::Mat prev_words = prev.isContinuous() ? prev : prev.clone();
+	const cv::Mat cur_words = cur.isContinuous() ? cur : cur.clone();
 	const int n_prev = prev.rows, n_cur = cur.rows;
 	std::vector<int> distances(static_cast<size_t>(n_cur));
 	std::vector<int> col_best(static_cast<size_t>(n_cur), std::numeric_limits<int>::max());

@@ -15,7 +15,8 @@ namespace {
 class SimSource final : public FrameSource
 {
 public:
-	SimSource(const SourceConfig &config) : config_(config.sim), realtime_(config.realtime), scene_(config.sim)
+	explicit SimSource(const SourceConfig &config)
+		: config_(config.sim), realtime_(config.realtime), scene_(config.sim)
 	{
 		if (!(config_.fps > 0 && config_.fps <= 1000))
 			throw SourceError("sim: fps must be in (0, 1000]");
