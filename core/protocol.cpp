@@ -85,6 +85,8 @@ std::string frame_message(const FrameResult &result)
 			  {"label", to_string(point.label)},
 			  {"pu", round_to(point.prev_u, 0.01)},
 			  {"pv", round_to(point.prev_v, 0.01)}};
+		if (point.track != 0)
+			p["track"] = point.track;
 		if (point.xyz_m)
 			p["xyz_m"] = {round_to((*point.xyz_m)[0], 0.001), round_to((*point.xyz_m)[1], 0.001),
 				      round_to((*point.xyz_m)[2], 0.001)};
@@ -133,6 +135,7 @@ FrameResult parse_frame_message(const json &message)
 		point.label = parse_label(p.at("label").get<std::string>());
 		point.prev_u = p.value("pu", point.u);
 		point.prev_v = p.value("pv", point.v);
+		point.track = p.value("track", uint64_t{0});
 		if (p.contains("xyz_m"))
 			point.xyz_m = p.at("xyz_m").get<std::array<float, 3>>();
 		result.points.push_back(point);

@@ -25,6 +25,7 @@ struct LabelledPoint {
 	PointLabel label = PointLabel::Uncertain;
 	float prev_u = 0; ///< where the point was matched in the previous frame
 	float prev_v = 0;
+	uint64_t track = 0; ///< the same number while the point is followed from frame to frame; 0 = unknown
 	std::optional<std::array<float, 3>> xyz_m; ///< left-camera coordinates, when depth is known
 };
 

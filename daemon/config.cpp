@@ -309,6 +309,17 @@ const std::vector<Option> &options()
 		o.push_back(number(
 			"classifier", "min_matches", "fewer matches: no homography, all uncertain",
 			[](DaemonConfig &c) -> int & { return c.motion.classifier.min_matches; }, 4, 100000));
+		// [memory]: beyond the seed (core/vision/temporal.hpp)
+		o.push_back(number(
+			"memory", "window_s", "time constant of each point's remembered own motion; 0 = seed only",
+			[](DaemonConfig &c) -> double & { return c.motion.temporal.window_s; }, 0, 60));
+		o.push_back(number(
+			"memory", "chi2", "gate on the remembered own motion (chi-square, 2 dof)",
+			[](DaemonConfig &c) -> double & { return c.motion.temporal.chi2; }, 0.1, 1000));
+		o.push_back(number(
+			"memory", "min_age", "frames a point is followed before its memory may label it",
+			[](DaemonConfig &c) -> int & { return c.motion.temporal.min_age; }, 1, 10000));
+
 		// [output]
 		o.push_back(text("output", "socket", "Unix socket path for clients",
 				 [](DaemonConfig &c) -> std::string & { return c.output.socket; }));

@@ -149,15 +149,19 @@ void Pipeline::capture_loop()
 void Pipeline::dispatch_loop()
 {
 	std::shared_future<FeaturesPtr> previous;
+	std::shared_future<TracksPtr> previous_tracks;
 	uint64_t order = 0;
 	while (auto index = ring_.pop()) {
 		auto job = std::make_unique<Job>();
 		job->order = order++;
 		job->frame = pool_.adopt(*index);
 		job->previous = previous;
+		job->previous_tracks = previous_tracks;
 		job->provides_features = job->frame->status != FrameStatus::Corrupt;
-		if (job->provides_features)
+		if (job->provides_features) {
 			previous = job->features.get_future().share();
+			previous_tracks = job->tracks.get_future().share();
+		}
 		{
 			// Bound the frames in flight, so a slow sink backs up into the ring (where the overflow
 			// policy decides) instead of into an ever-growing pile of finished results.
@@ -213,15 +217,21 @@ void Pipeline::process(Job &job)
 	result.height = frame.left.rows;
 
 	bool promised = false;
+	bool tracks_promised = false;
 	try {
 		if (job.provides_features && options_.motion.enabled) {
 			auto features = std::make_shared<const vision::FrameFeatures>(
 				vision::extract_stage(frame, options_.motion, result.timing));
 			job.features.set_value(features);
 			promised = true;
-			// Waits only for an earlier frame that another worker already holds: no deadlock.
+			// Both wait only for an earlier frame that another worker already holds: no deadlock. The
+			// memory makes the pair stage run in frame order; extraction, the costly part, does not wait.
 			const FeaturesPtr previous = job.previous.valid() ? job.previous.get() : nullptr;
-			vision::pair_stage(previous.get(), *features, frame, options_.motion, result);
+			const TracksPtr previous_tracks = job.previous_tracks.valid() ? job.previous_tracks.get() : nullptr;
+			auto tracks = std::make_shared<const vision::TrackSet>(vision::pair_stage(
+				previous.get(), previous_tracks.get(), *features, frame, options_.motion, result));
+			job.tracks.set_value(std::move(tracks));
+			tracks_promised = true;
 		}
 	} catch (const std::exception &e) {
 		processing_errors_.fetch_add(1);
@@ -231,6 +241,8 @@ void Pipeline::process(Job &job)
 	}
 	if (job.provides_features && !promised)
 		job.features.set_value(nullptr); // the next frame pairs with nothing rather than waiting forever
+	if (job.provides_features && !tracks_promised)
+		job.tracks.set_value(nullptr); // and its memory starts afresh
 	if (observer_)
 		observer_(frame);
 	job.frame.reset(); // back to the pool before publishing

@@ -99,7 +99,8 @@ double texture_distance_near(const cv::Vec3f &colour, const cv::Mat &image, cv::
 	return best;
 }
 
-Classification classify(std::span<const PointPair> pairs, const cv::Mat &cur_image, const ClassifierParams &params)
+Classification classify(std::span<const PointPair> pairs, const cv::Mat &cur_image, const ClassifierParams &params,
+			std::span<const uint8_t> known_moving)
 {
 	Classification out;
 	const size_t n = pairs.size();
@@ -113,8 +114,20 @@ Classification classify(std::span<const PointPair> pairs, const cv::Mat &cur_ima
 		displacement[i] = pairs[i].cur - pairs[i].prev;
 	}
 
-	// 1. Initial homography over every match (Table 1).
-	const auto initial = fit_homography(prev_pts, cur_pts, params.ransac_threshold_px, params.min_matches);
+	auto votes = [&](size_t i) { return known_moving.size() != n || known_moving[i] == 0; };
+
+	// 1. Initial homography over every match (Table 1), but for the points known to move.
+	std::optional<HomographyFit> initial;
+	{
+		std::vector<cv::Point2f> from, to;
+		for (size_t i = 0; i < n; ++i) {
+			if (votes(i)) {
+				from.push_back(prev_pts[i]);
+				to.push_back(cur_pts[i]);
+			}
+		}
+		initial = fit_homography(from, to, params.ransac_threshold_px, params.min_matches);
+	}
 	if (!initial)
 		return out;
 	const cv::Matx33d h1 = initial->h;
@@ -153,8 +166,10 @@ Classification classify(std::span<const PointPair> pairs, const cv::Mat &cur_ima
 	{
 		std::vector<cv::Point2f> from, to;
 		for (size_t i : static_set) {
-			from.push_back(prev_pts[i]);
-			to.push_back(cur_pts[i]);
+			if (votes(i)) {
+				from.push_back(prev_pts[i]);
+				to.push_back(cur_pts[i]);
+			}
 		}
 		if (auto refined = fit_homography(from, to, params.ransac_threshold_px, params.min_matches)) {
 			h2 = refined->h;

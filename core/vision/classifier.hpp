@@ -107,6 +107,10 @@ struct Classification {
 };
 
 /// The whole chain. `cur_image` is frame n (BGR or grey), sampled at projected points for eq. 6.
-Classification classify(std::span<const PointPair> pairs, const cv::Mat &cur_image, const ClassifierParams &params);
+/// `known_moving` (empty, or one per pair) marks points already known to move (the motion memory of
+/// temporal.hpp): they take no part in either homography fit, so a slow mover cannot drag the static scene's
+/// motion along with it; their labels are still decided by the steps above.
+Classification classify(std::span<const PointPair> pairs, const cv::Mat &cur_image, const ClassifierParams &params,
+			std::span<const uint8_t> known_moving = {});
 
 } // namespace stereod::vision

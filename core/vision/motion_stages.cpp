@@ -10,11 +10,14 @@ FrameFeatures extract_stage(const StereoFrame &frame, const MotionParams &params
 	return extract_features(frame.left, params.features, params.classifier.colour_radius);
 }
 
-void pair_stage(const FrameFeatures *prev, const FrameFeatures &cur, const StereoFrame &frame,
-		const MotionParams &params, FrameResult &result)
+TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, const FrameFeatures &cur,
+		    const StereoFrame &frame, const MotionParams &params, FrameResult &result)
 {
+	FollowInput follow;
+	follow.cur_keypoints = cur.keypoints.size();
+	follow.t_ns = frame.device_ns;
 	if (prev == nullptr)
-		return;
+		return follow_tracks(nullptr, follow, params.classifier, params.temporal);
 	std::vector<Match> matches;
 	{
 		StageTimer timer(result.timing, "match");
@@ -28,7 +31,21 @@ void pair_stage(const FrameFeatures *prev, const FrameFeatures &cur, const Stere
 		const auto c = static_cast<size_t>(m.cur);
 		pairs.push_back({prev->keypoints[p].pt, cur.keypoints[c].pt, prev->colours[p], cur.colours[c]});
 	}
-	const Classification classification = classify(pairs, frame.left, params.classifier);
+	std::vector<uint8_t> known_moving(matches.size(), 0);
+	if (prev_tracks != nullptr) {
+		for (size_t i = 0; i < matches.size(); ++i) {
+			const auto p = static_cast<size_t>(matches[i].prev);
+			known_moving[i] = p < prev_tracks->by_keypoint.size() &&
+					  memory_says_moving(prev_tracks->by_keypoint[p], params.classifier, params.temporal);
+		}
+	}
+	Classification classification = classify(pairs, frame.left, params.classifier, known_moving);
+	follow.matches = matches;
+	follow.pairs = pairs;
+	follow.homography = classification.homography ? &*classification.homography : nullptr;
+	follow.cur_image = &frame.left;
+	TrackSet tracks = follow_tracks(prev_tracks, follow, params.classifier, params.temporal);
+	promote_remembered_movers(classification.labels, matches, tracks, params.classifier, params.temporal);
 	result.points.reserve(pairs.size());
 	for (size_t i = 0; i < pairs.size(); ++i) {
 		LabelledPoint point;
@@ -37,6 +54,7 @@ void pair_stage(const FrameFeatures *prev, const FrameFeatures &cur, const Stere
 		point.prev_u = pairs[i].prev.x;
 		point.prev_v = pairs[i].prev.y;
 		point.label = classification.labels[i];
+		point.track = tracks.by_keypoint[static_cast<size_t>(matches[i].cur)].id;
 		result.points.push_back(point);
 	}
 	if (classification.homography) {
@@ -47,6 +65,7 @@ void pair_stage(const FrameFeatures *prev, const FrameFeatures &cur, const Stere
 		ego.inliers = classification.homography_inliers;
 		result.ego = ego;
 	}
+	return tracks;
 }
 
 } // namespace stereod::vision

@@ -10,7 +10,7 @@ TEST(Evaluation, ScoresLabelsAgainstTheMask)
 	cv::Mat mask = cv::Mat::zeros(100, 100, CV_8UC1);
 	mask(cv::Rect(50, 50, 50, 50)).setTo(3); // a mover in the bottom-right quarter
 	FrameResult r;
-	auto point = [](float u, float v, PointLabel label) { return LabelledPoint{u, v, label, u, v, std::nullopt}; };
+	auto point = [](float u, float v, PointLabel label) { return LabelledPoint{u, v, label, u, v, 0, std::nullopt}; };
 	r.points = {point(60, 60, PointLabel::Dynamic),	 point(70, 70, PointLabel::Dynamic), // true dynamic
 		    point(10, 10, PointLabel::Dynamic),					     // false dynamic
 		    point(80, 80, PointLabel::Static),					     // missed
@@ -34,8 +34,8 @@ TEST(Evaluation, BorderSkipsPointsOnTheOutline)
 	cv::Mat mask = cv::Mat::zeros(100, 100, CV_8UC1);
 	mask(cv::Rect(50, 0, 50, 100)).setTo(1);
 	FrameResult r;
-	r.points = {{50.0F, 50.0F, PointLabel::Static, 0, 0, std::nullopt},
-		    {80.0F, 50.0F, PointLabel::Dynamic, 0, 0, std::nullopt}};
+	r.points = {{50.0F, 50.0F, PointLabel::Static, 0, 0, 0, std::nullopt},
+		    {80.0F, 50.0F, PointLabel::Dynamic, 0, 0, 0, std::nullopt}};
 	EXPECT_EQ(score_frame(r, mask, 0).static_false, 1U);
 	const LabelScore bordered = score_frame(r, mask, 3);
 	EXPECT_EQ(bordered.static_false, 0U);

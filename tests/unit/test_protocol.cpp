@@ -17,8 +17,8 @@ TEST(Protocol, FrameMessageCarriesTheDocumentedFields)
 	r.source = "sim";
 	r.status = FrameStatus::Incomplete;
 	r.timing = {{"extract", 1.23456}, {"match", 0.5}};
-	r.points = {{10.123F, 20.5F, PointLabel::Dynamic, 8.0F, 20.0F, std::array<float, 3>{1.0F, 2.0F, 3.0F}},
-		    {1.0F, 2.0F, PointLabel::Static, 1.0F, 2.0F, std::nullopt}};
+	r.points = {{10.123F, 20.5F, PointLabel::Dynamic, 8.0F, 20.0F, 42, std::array<float, 3>{1.0F, 2.0F, 3.0F}},
+		    {1.0F, 2.0F, PointLabel::Static, 1.0F, 2.0F, 0, std::nullopt}};
 	const auto j = nlohmann::json::parse(protocol::frame_message(r));
 	for (const char *key : {"v", "type", "seq", "t_capture_ns", "t_host_ns", "t_publish_ns", "source", "status",
 				"timing_ms", "points", "ego", "groups"})
@@ -30,6 +30,8 @@ TEST(Protocol, FrameMessageCarriesTheDocumentedFields)
 	EXPECT_EQ(j["points"][0]["u"], 10.12);
 	EXPECT_TRUE(j["points"][0].contains("xyz_m"));
 	EXPECT_FALSE(j["points"][1].contains("xyz_m")) << "never invented";
+	EXPECT_EQ(j["points"][0]["track"], 42);
+	EXPECT_FALSE(j["points"][1].contains("track")) << "0 means not followed";
 	EXPECT_TRUE(j["ego"].is_null()) << "no stage computed it";
 	EXPECT_TRUE(j["groups"].empty());
 }
@@ -39,7 +41,7 @@ TEST(Protocol, FrameMessageRoundTrips)
 	FrameResult r;
 	r.seq = 7;
 	r.source = "video";
-	r.points = {{5.5F, 6.25F, PointLabel::Uncertain, 5.0F, 6.0F, std::nullopt}};
+	r.points = {{5.5F, 6.25F, PointLabel::Uncertain, 5.0F, 6.0F, 77, std::nullopt}};
 	r.ego = EgoMotion{{1, 0, 2, 0, 1, 3, 0, 0, 1}, 99};
 	const FrameResult back = protocol::parse_frame_message(nlohmann::json::parse(protocol::frame_message(r)));
 	EXPECT_EQ(back.seq, 7U);
@@ -47,6 +49,7 @@ TEST(Protocol, FrameMessageRoundTrips)
 	ASSERT_EQ(back.points.size(), 1U);
 	EXPECT_EQ(back.points[0].label, PointLabel::Uncertain);
 	EXPECT_FLOAT_EQ(back.points[0].v, 6.25F);
+	EXPECT_EQ(back.points[0].track, 77U);
 	ASSERT_TRUE(back.ego.has_value());
 	EXPECT_EQ(back.ego->inliers, 99);
 	EXPECT_DOUBLE_EQ(back.ego->homography[2], 2.0);

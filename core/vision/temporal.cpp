@@ -1,0 +1,83 @@
+#include "core/vision/temporal.hpp"
+
+#include <cmath>
+
+namespace stereod::vision {
+
+TrackSet follow_tracks(const TrackSet *prev, const FollowInput &input, const ClassifierParams &classifier,
+		       const TemporalParams &params)
+{
+	TrackSet out;
+	out.t_ns = input.t_ns;
+	out.next_id = prev != nullptr ? prev->next_id : 1;
+	out.by_keypoint.resize(input.cur_keypoints);
+
+	double lambda = 0;
+	if (prev != nullptr && params.window_s > 0 && input.t_ns > prev->t_ns)
+		lambda = std::exp(-static_cast<double>(input.t_ns - prev->t_ns) * 1e-9 / params.window_s);
+	const double sigma2 = classifier.reprojection_sigma_px * classifier.reprojection_sigma_px;
+	const double max_motion2 = classifier.dynamic_max_motion_px * classifier.dynamic_max_motion_px;
+	std::vector<bool> prev_taken(prev != nullptr ? prev->by_keypoint.size() : 0, false);
+
+	const bool can_follow = prev != nullptr && input.homography != nullptr && input.cur_image != nullptr;
+	for (size_t i = 0; can_follow && i < input.matches.size() && i < input.pairs.size(); ++i) {
+		const auto p = static_cast<size_t>(input.matches[i].prev);
+		const auto c = static_cast<size_t>(input.matches[i].cur);
+		if (p >= prev->by_keypoint.size() || c >= out.by_keypoint.size() || prev_taken[p])
+			continue;
+		const PointPair &pair = input.pairs[i];
+		const cv::Point2f own = pair.cur - project(*input.homography, pair.prev);
+		const double own2 = static_cast<double>(own.dot(own));
+		if (!std::isfinite(own2) || own2 > max_motion2)
+			continue;
+		if (texture_distance_near(pair.prev_colour, *input.cur_image, pair.cur, classifier) >=
+		    classifier.texture_threshold)
+			continue;
+		const TrackState &before = prev->by_keypoint[p];
+		if (before.count > 0) {
+			// A jump away from the track's own recent motion is a mismatch onto a look-alike, not motion.
+			const cv::Point2f innovation = own - before.motion / before.count;
+			if (static_cast<double>(innovation.dot(innovation)) / sigma2 >= classifier.reprojection_chi2)
+				continue;
+		}
+		prev_taken[p] = true;
+		TrackState &after = out.by_keypoint[c];
+		after.id = before.id;
+		after.motion = static_cast<float>(lambda) * before.motion + own;
+		after.count = static_cast<float>(lambda) * before.count + 1;
+		after.noise_weight = static_cast<float>(lambda * lambda) * before.noise_weight + 1;
+		after.age = before.age + 1;
+	}
+	for (auto &state : out.by_keypoint)
+		if (state.id == 0)
+			state.id = out.next_id++;
+	return out;
+}
+
+bool memory_says_moving(const TrackState &state, const ClassifierParams &classifier, const TemporalParams &params)
+{
+	if (params.window_s <= 0 || state.age < static_cast<uint32_t>(std::max(params.min_age, 1)) ||
+	    state.noise_weight <= 0)
+		return false;
+	const double sigma2 = classifier.reprojection_sigma_px * classifier.reprojection_sigma_px;
+	const double r2 = static_cast<double>(state.motion.dot(state.motion));
+	return r2 / (sigma2 * static_cast<double>(state.noise_weight)) > params.chi2;
+}
+
+int promote_remembered_movers(std::span<PointLabel> labels, std::span<const Match> matches, const TrackSet &tracks,
+			      const ClassifierParams &classifier, const TemporalParams &params)
+{
+	int promoted = 0;
+	for (size_t i = 0; i < labels.size() && i < matches.size(); ++i) {
+		const auto c = static_cast<size_t>(matches[i].cur);
+		if (labels[i] == PointLabel::Dynamic || c >= tracks.by_keypoint.size())
+			continue;
+		if (memory_says_moving(tracks.by_keypoint[c], classifier, params)) {
+			labels[i] = PointLabel::Dynamic;
+			++promoted;
+		}
+	}
+	return promoted;
+}
+
+} // namespace stereod::vision

@@ -1,0 +1,73 @@
+#pragma once
+// Motion memory: follows each feature point from frame to frame and keeps a decaying sum of its motion
+// relative to the static scene, so a mover too slow to clear the seed's per-frame gate (one walking along the
+// line of sight, or one momentarily moving with the camera's pan) is still found once its small motions add
+// up. This goes beyond seed 000, which judges every frame pair alone; `window_s = 0` turns it off.
+//
+// Per point and frame: r = x_n - H x_{n-1} (own motion, pixels). A followed point keeps
+//   R = lambda R' + r,  S = lambda S' + 1,  W = lambda^2 W' + 1,  lambda = exp(-dt / window_s)
+// so R / S is its recent mean own motion per frame. The gate is |R|^2 / (sigma^2 W) > chi2 (2 dof), with
+// sigma the seed's per-frame position noise (classifier.reprojection_sigma_px): each frame's residual is
+// taken as independent noise. That is conservative on purpose. A static point's sum mostly telescopes
+// (R ~ e_n minus a mean of earlier position errors), but detectors that switch pyramid level or corner
+// position give heavy-tailed jumps, and a gate built on the measured typical residual let hundreds of
+// static points through on the sim (docs/classification.md has the numbers).
+// A point stops being followed (and starts afresh) when its match is not trusted: the texture at both ends
+// differs, or r jumps away from the track's mean own motion by more than the per-frame gate, which is what a
+// mismatch onto a look-alike (a repeated window, say) does.
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "core/result.hpp"
+#include "core/vision/classifier.hpp"
+#include "core/vision/matching.hpp"
+
+namespace stereod::vision {
+
+struct TemporalParams {
+	double window_s = 0.5; ///< time constant of the memory; 0 turns it off (the seed's per-pair labels only)
+	double chi2 = 9.21;    ///< gate on the remembered own motion (chi-square, 2 dof, 99%)
+	int min_age = 3;       ///< frames a point must have been followed before its memory may label it
+};
+
+struct TrackState {
+	uint64_t id = 0;	   ///< stable while the point is followed; 0 = none
+	cv::Point2f motion{0, 0};  ///< R: decayed sum of own motion, pixels
+	float count = 0;	   ///< decayed number of frames summed (R / count: mean own motion per frame)
+	float noise_weight = 0;	   ///< W: decayed sum of squared weights, the noise variance of R over sigma^2
+	uint32_t age = 0;	   ///< frames followed
+};
+
+/// The memory of one frame: a state per keypoint of that frame.
+struct TrackSet {
+	int64_t t_ns = 0;
+	std::vector<TrackState> by_keypoint;
+	uint64_t next_id = 1; ///< ids are handed out in frame order, so a replay gives the same ids
+};
+
+/// What follow_tracks() needs to know about one match: which keypoints it joins, both ends, and the colours.
+struct FollowInput {
+	std::span<const Match> matches;	    ///< frame n-1 keypoint -> frame n keypoint
+	std::span<const PointPair> pairs;   ///< the same matches' positions and colours, index for index
+	const cv::Matx33d *homography;	    ///< the static scene's motion n-1 -> n; null: no track is followed
+	const cv::Mat *cur_image;	    ///< frame n, for the texture check of a followed match
+	size_t cur_keypoints = 0;	    ///< keypoints in frame n
+	int64_t t_ns = 0;		    ///< frame n's capture time
+};
+
+/// Frame n's memory from frame n-1's (null: everything starts afresh, as after a gap or on the first frame).
+TrackSet follow_tracks(const TrackSet *prev, const FollowInput &input, const ClassifierParams &classifier,
+		       const TemporalParams &params);
+
+/// True when a followed point's remembered own motion clears the gate.
+bool memory_says_moving(const TrackState &state, const ClassifierParams &classifier, const TemporalParams &params);
+
+/// Relabels as dynamic every matched point whose memory says it moves (labels[i] belongs to matches[i]);
+/// returns how many changed. Labels the seed already made dynamic stay dynamic.
+int promote_remembered_movers(std::span<PointLabel> labels, std::span<const Match> matches, const TrackSet &tracks,
+			      const ClassifierParams &classifier, const TemporalParams &params);
+
+} // namespace stereod::vision
