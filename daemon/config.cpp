@@ -258,6 +258,10 @@ const std::vector<Option> &options()
 		o.push_back(number(
 			"matching", "max_distance", "largest Hamming distance accepted",
 			[](DaemonConfig &c) -> int & { return c.motion.matching.max_distance; }, 1, 256));
+		o.push_back(number(
+			"matching", "search_radius_px",
+			"guided matching: candidates within this of the predicted position; 0 = brute force",
+			[](DaemonConfig &c) -> float & { return c.motion.matching.search_radius_px; }, 0, 10000));
 		// [classifier]
 		o.push_back(number(
 			"classifier", "ransac_threshold_px", "RANSAC inlier distance, pixels",

@@ -227,7 +227,8 @@ void Pipeline::process(Job &job)
 			// Both wait only for an earlier frame that another worker already holds: no deadlock. The
 			// memory makes the pair stage run in frame order; extraction, the costly part, does not wait.
 			const FeaturesPtr previous = job.previous.valid() ? job.previous.get() : nullptr;
-			const TracksPtr previous_tracks = job.previous_tracks.valid() ? job.previous_tracks.get() : nullptr;
+			const TracksPtr previous_tracks =
+				job.previous_tracks.valid() ? job.previous_tracks.get() : nullptr;
 			auto tracks = std::make_shared<const vision::TrackSet>(vision::pair_stage(
 				previous.get(), previous_tracks.get(), *features, frame, options_.motion, result));
 			job.tracks.set_value(std::move(tracks));

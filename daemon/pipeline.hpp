@@ -82,11 +82,11 @@ private:
 	struct Job {
 		uint64_t order = 0;
 		FrameHandle frame;
-		std::shared_future<FeaturesPtr> previous; ///< invalid for the first frame
-		std::promise<FeaturesPtr> features;	  ///< fulfilled as soon as this frame's features exist
+		std::shared_future<FeaturesPtr> previous;      ///< invalid for the first frame
+		std::promise<FeaturesPtr> features;	       ///< fulfilled as soon as this frame's features exist
 		std::shared_future<TracksPtr> previous_tracks; ///< the previous frame's motion memory
 		std::promise<TracksPtr> tracks;		       ///< fulfilled once this frame is classified
-		bool provides_features = true;		  ///< false for corrupt frames (they pass the previous on)
+		bool provides_features = true;		       ///< false for corrupt frames (they pass the previous on)
 	};
 
 	void capture_loop();

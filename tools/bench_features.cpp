@@ -17,6 +17,7 @@
 #include "core/vision/features.hpp"
 #include "core/vision/matching.hpp"
 #include "core/vision/surf.hpp"
+#include "core/vision/temporal.hpp"
 
 using namespace stereod;
 using Clock = std::chrono::steady_clock;
@@ -129,10 +130,38 @@ int main(int argc, char **argv)
 		measure(repeats, [&] { return vision::match_features(f0, f1, vision::MatchParams{}).size(); });
 	const Timing classify_t = measure(
 		repeats * 4, [&] { return vision::classify(pairs, next, vision::ClassifierParams{}).labels.size(); });
+	// The same plus the motion memory (temporal.hpp), which follows every match from a previous memory.
+	vision::TrackSet previous_memory;
+	previous_memory.by_keypoint.resize(f0.keypoints.size());
+	for (auto &state : previous_memory.by_keypoint) {
+		state.id = previous_memory.next_id++;
+		state.age = 5;
+		state.count = 4;
+		state.noise_weight = 3;
+	}
+	previous_memory.t_ns = 0;
+	const Timing memory_t = measure(repeats * 4, [&] {
+		const vision::ClassifierParams cp;
+		const vision::TemporalParams tp;
+		auto classification = vision::classify(pairs, next, cp);
+		vision::FollowInput follow;
+		follow.matches = matches;
+		follow.pairs = pairs;
+		follow.homography = classification.homography ? &*classification.homography : nullptr;
+		follow.cur_image = &next;
+		follow.cur_keypoints = f1.keypoints.size();
+		follow.t_ns = 33'333'333;
+		const vision::TrackSet memory = vision::follow_tracks(&previous_memory, follow, cp, tp);
+		return static_cast<size_t>(
+			vision::promote_remembered_movers(classification.labels, matches, memory, cp, tp));
+	});
 	std::printf("\n| step | input | median ms | best ms |\n|---|---|---|---|\n");
 	std::printf("| matching (one-pass brute force, ratio + cross check) | %zu x %zu ORB | %.2f | %.2f |\n",
 		    f0.keypoints.size(), f1.keypoints.size(), match_t.median_ms, match_t.best_ms);
 	std::printf("| classification (seed 000, all steps after matching) | %zu matches | %.2f | %.2f |\n",
 		    pairs.size(), classify_t.median_ms, classify_t.best_ms);
+	std::printf("| classification + motion memory (all after matching, as the pipeline runs it) | %zu matches | "
+		    "%.2f | %.2f |\n",
+		    pairs.size(), memory_t.median_ms, memory_t.best_ms);
 	return 0;
 }

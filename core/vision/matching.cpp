@@ -1,6 +1,8 @@
 #include "core/vision/matching.hpp"
 
+#include <algorithm>
 #include <bit>
+#include <cmath>
 #include <cstring>
 #include <limits>
 
@@ -136,7 +138,141 @@ std::vector<Match> match_float(const cv::Mat &prev, const cv::Mat &cur, const Ma
 	return matches;
 }
 
+/// Best and second-best per row and best per column over the candidate pairs a caller visits, then the ratio
+/// test, max distance and cross check: the filtering shared by both guided matchers.
+class CandidateTable
+{
+public:
+	CandidateTable(int n_prev, int n_cur)
+		: rows_(static_cast<size_t>(n_prev)), col_best_(static_cast<size_t>(n_cur), kNone),
+		  col_arg_(static_cast<size_t>(n_cur), kUnset)
+	{
+	}
+	void add(int i, int j, float d)
+	{
+		Row &r = rows_[static_cast<size_t>(i)];
+		if (d < r.best) {
+			r.second = r.best;
+			r.best = d;
+			r.arg = j;
+		} else if (d < r.second) {
+			r.second = d;
+		}
+		if (d < col_best_[static_cast<size_t>(j)]) {
+			col_best_[static_cast<size_t>(j)] = d;
+			col_arg_[static_cast<size_t>(j)] = i;
+		}
+	}
+	[[nodiscard]] std::vector<Match> matches(const MatchParams &params, float max_distance) const
+	{
+		std::vector<Match> out;
+		for (size_t i = 0; i < rows_.size(); ++i) {
+			const Row &r = rows_[i];
+			if (r.arg == kUnset || r.best > max_distance)
+				continue;
+			if (r.second != kNone && r.best > params.ratio * r.second)
+				continue;
+			if (params.cross_check && col_arg_[static_cast<size_t>(r.arg)] != static_cast<int>(i))
+				continue;
+			out.push_back({static_cast<int>(i), r.arg, r.best});
+		}
+		return out;
+	}
+
+private:
+	static constexpr float kNone = std::numeric_limits<float>::max();
+	struct Row {
+		float best = kNone, second = kNone;
+		int arg = kUnset;
+	};
+	std::vector<Row> rows_;
+	std::vector<float> col_best_;
+	std::vector<int> col_arg_;
+};
+
+/// Keypoints of one frame binned on a square grid of the search radius, so the candidates near a point are
+/// in the 3 x 3 cells around it.
+class KeypointGrid
+{
+public:
+	KeypointGrid(const std::vector<cv::KeyPoint> &keypoints, float cell) : cell_(cell)
+	{
+		order_.resize(keypoints.size());
+		keys_.resize(keypoints.size());
+		for (size_t j = 0; j < keypoints.size(); ++j) {
+			order_[j] = static_cast<int>(j);
+			keys_[j] = key(cell_of(keypoints[j].pt.x), cell_of(keypoints[j].pt.y));
+		}
+		std::sort(order_.begin(), order_.end(),
+			  [&](int a, int b) { return keys_[static_cast<size_t>(a)] < keys_[static_cast<size_t>(b)]; });
+		sorted_keys_.resize(order_.size());
+		for (size_t k = 0; k < order_.size(); ++k)
+			sorted_keys_[k] = keys_[static_cast<size_t>(order_[k])];
+	}
+	/// Calls visit(j) for every keypoint in the cells around `at` (a superset of those within one cell).
+	template <typename Visit>
+	void around(cv::Point2f at, Visit &&visit) const
+	{
+		const int64_t cx = cell_of(at.x), cy = cell_of(at.y);
+		for (int64_t y = cy - 1; y <= cy + 1; ++y) {
+			for (int64_t x = cx - 1; x <= cx + 1; ++x) {
+				const auto [lo, hi] =
+					std::equal_range(sorted_keys_.begin(), sorted_keys_.end(), key(x, y));
+				for (auto it = lo; it != hi; ++it)
+					visit(order_[static_cast<size_t>(it - sorted_keys_.begin())]);
+			}
+		}
+	}
+
+private:
+	[[nodiscard]] int64_t cell_of(float v) const { return static_cast<int64_t>(std::floor(v / cell_)); }
+	static int64_t key(int64_t x, int64_t y) { return (y << 32) + x; }
+	float cell_;
+	std::vector<int> order_;
+	std::vector<int64_t> keys_, sorted_keys_;
+};
+
 } // namespace
+
+std::vector<Match> match_features_guided(const FrameFeatures &prev, const FrameFeatures &cur,
+					 std::span<const cv::Point2f> predicted, const MatchParams &params)
+{
+	if (prev.descriptors.empty() || cur.descriptors.empty() || params.search_radius_px <= 0 ||
+	    predicted.size() != prev.keypoints.size() || prev.descriptors.cols != cur.descriptors.cols ||
+	    prev.descriptors.type() != cur.descriptors.type())
+		return match_features(prev, cur, params);
+	const float radius = params.search_radius_px;
+	const float radius2 = radius * radius;
+	const KeypointGrid grid(cur.keypoints, radius);
+	CandidateTable table(prev.descriptors.rows, cur.descriptors.rows);
+	const bool binary =
+		cur.norm_type == cv::NORM_HAMMING && prev.descriptors.type() == CV_8U && prev.descriptors.cols % 8 == 0;
+	const cv::Mat prev_d = prev.descriptors.isContinuous() ? prev.descriptors : prev.descriptors.clone();
+	const cv::Mat cur_d = cur.descriptors.isContinuous() ? cur.descriptors : cur.descriptors.clone();
+	const int words = prev_d.cols / 8;
+	for (int i = 0; i < prev_d.rows; ++i) {
+		const cv::Point2f at = predicted[static_cast<size_t>(i)];
+		if (!std::isfinite(at.x) || !std::isfinite(at.y))
+			continue;
+		grid.around(at, [&](int j) {
+			const cv::Point2f offset = cur.keypoints[static_cast<size_t>(j)].pt - at;
+			if (offset.dot(offset) > radius2)
+				return;
+			float d = 0;
+			if (binary) {
+				int bits = 0;
+				hamming_rows(prev_d.ptr<uint64_t>(i), cur_d.ptr<uint64_t>(j), 1, words, &bits);
+				d = static_cast<float>(bits);
+			} else {
+				d = static_cast<float>(cv::norm(prev_d.row(i), cur_d.row(j), cur.norm_type));
+			}
+			table.add(i, j, d);
+		});
+	}
+	// max_distance is in Hamming bits; float descriptors rely on the ratio test and cross check.
+	return table.matches(params,
+			     binary ? static_cast<float>(params.max_distance) : std::numeric_limits<float>::max());
+}
 
 std::vector<Match> match_features(const FrameFeatures &prev, const FrameFeatures &cur, const MatchParams &params)
 {

@@ -21,7 +21,11 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 	std::vector<Match> matches;
 	{
 		StageTimer timer(result.timing, "match");
-		matches = match_features(*prev, cur, params.matching);
+		const auto predicted = prev_tracks != nullptr && params.matching.search_radius_px > 0
+					       ? predict_positions(*prev_tracks, prev->keypoints, frame.device_ns)
+					       : std::nullopt;
+		matches = predicted ? match_features_guided(*prev, cur, *predicted, params.matching)
+				    : match_features(*prev, cur, params.matching);
 	}
 	StageTimer timer(result.timing, "classify");
 	std::vector<PointPair> pairs;
@@ -35,8 +39,9 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 	if (prev_tracks != nullptr) {
 		for (size_t i = 0; i < matches.size(); ++i) {
 			const auto p = static_cast<size_t>(matches[i].prev);
-			known_moving[i] = p < prev_tracks->by_keypoint.size() &&
-					  memory_says_moving(prev_tracks->by_keypoint[p], params.classifier, params.temporal);
+			known_moving[i] =
+				p < prev_tracks->by_keypoint.size() &&
+				memory_says_moving(prev_tracks->by_keypoint[p], params.classifier, params.temporal);
 		}
 	}
 	Classification classification = classify(pairs, frame.left, params.classifier, known_moving);
@@ -45,6 +50,8 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 	follow.homography = classification.homography ? &*classification.homography : nullptr;
 	follow.cur_image = &frame.left;
 	TrackSet tracks = follow_tracks(prev_tracks, follow, params.classifier, params.temporal);
+	tracks.homography = classification.homography;
+	tracks.interval_ns = prev_tracks != nullptr ? frame.device_ns - prev_tracks->t_ns : 0;
 	promote_remembered_movers(classification.labels, matches, tracks, params.classifier, params.temporal);
 	result.points.reserve(pairs.size());
 	for (size_t i = 0; i < pairs.size(); ++i) {

@@ -54,6 +54,24 @@ TrackSet follow_tracks(const TrackSet *prev, const FollowInput &input, const Cla
 	return out;
 }
 
+std::optional<std::vector<cv::Point2f>> predict_positions(const TrackSet &tracks,
+							  const std::vector<cv::KeyPoint> &keypoints, int64_t next_t_ns)
+{
+	if (!tracks.homography || tracks.interval_ns <= 0 || tracks.by_keypoint.size() != keypoints.size())
+		return std::nullopt;
+	const int64_t interval = next_t_ns - tracks.t_ns;
+	// Within half an interval of the last one: the same cadence, so the same motion per frame.
+	if (2 * interval < tracks.interval_ns || 2 * interval > 3 * tracks.interval_ns)
+		return std::nullopt;
+	std::vector<cv::Point2f> predicted(keypoints.size());
+	for (size_t i = 0; i < keypoints.size(); ++i) {
+		const TrackState &state = tracks.by_keypoint[i];
+		const cv::Point2f own = state.count > 0 ? state.motion / state.count : cv::Point2f(0, 0);
+		predicted[i] = project(*tracks.homography, keypoints[i].pt) + own;
+	}
+	return predicted;
+}
+
 bool memory_says_moving(const TrackState &state, const ClassifierParams &classifier, const TemporalParams &params)
 {
 	if (params.window_s <= 0 || state.age < static_cast<uint32_t>(std::max(params.min_age, 1)) ||

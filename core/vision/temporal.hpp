@@ -16,6 +16,7 @@
 // differs, or r jumps away from the track's mean own motion by more than the per-frame gate, which is what a
 // mismatch onto a look-alike (a repeated window, say) does.
 #include <cstdint>
+#include <optional>
 #include <span>
 #include <vector>
 
@@ -34,33 +35,42 @@ struct TemporalParams {
 };
 
 struct TrackState {
-	uint64_t id = 0;	   ///< stable while the point is followed; 0 = none
-	cv::Point2f motion{0, 0};  ///< R: decayed sum of own motion, pixels
-	float count = 0;	   ///< decayed number of frames summed (R / count: mean own motion per frame)
-	float noise_weight = 0;	   ///< W: decayed sum of squared weights, the noise variance of R over sigma^2
-	uint32_t age = 0;	   ///< frames followed
+	uint64_t id = 0;	  ///< stable while the point is followed; 0 = none
+	cv::Point2f motion{0, 0}; ///< R: decayed sum of own motion, pixels
+	float count = 0;	  ///< decayed number of frames summed (R / count: mean own motion per frame)
+	float noise_weight = 0;	  ///< W: decayed sum of squared weights, the noise variance of R over sigma^2
+	uint32_t age = 0;	  ///< frames followed
 };
 
 /// The memory of one frame: a state per keypoint of that frame.
 struct TrackSet {
 	int64_t t_ns = 0;
+	int64_t interval_ns = 0;	       ///< since the frame before; 0 when there was none
+	std::optional<cv::Matx33d> homography; ///< the static scene's motion from the frame before to this one
 	std::vector<TrackState> by_keypoint;
 	uint64_t next_id = 1; ///< ids are handed out in frame order, so a replay gives the same ids
 };
 
 /// What follow_tracks() needs to know about one match: which keypoints it joins, both ends, and the colours.
 struct FollowInput {
-	std::span<const Match> matches;	    ///< frame n-1 keypoint -> frame n keypoint
-	std::span<const PointPair> pairs;   ///< the same matches' positions and colours, index for index
-	const cv::Matx33d *homography;	    ///< the static scene's motion n-1 -> n; null: no track is followed
-	const cv::Mat *cur_image;	    ///< frame n, for the texture check of a followed match
-	size_t cur_keypoints = 0;	    ///< keypoints in frame n
-	int64_t t_ns = 0;		    ///< frame n's capture time
+	std::span<const Match> matches;	  ///< frame n-1 keypoint -> frame n keypoint
+	std::span<const PointPair> pairs; ///< the same matches' positions and colours, index for index
+	const cv::Matx33d *homography;	  ///< the static scene's motion n-1 -> n; null: no track is followed
+	const cv::Mat *cur_image;	  ///< frame n, for the texture check of a followed match
+	size_t cur_keypoints = 0;	  ///< keypoints in frame n
+	int64_t t_ns = 0;		  ///< frame n's capture time
 };
 
 /// Frame n's memory from frame n-1's (null: everything starts afresh, as after a gap or on the first frame).
 TrackSet follow_tracks(const TrackSet *prev, const FollowInput &input, const ClassifierParams &classifier,
 		       const TemporalParams &params);
+
+/// Where each keypoint of the memory's frame should be one frame later, for guided matching: the last frame
+/// pair's scene motion carried on (the camera keeps its image velocity over one interval) plus the point's
+/// own remembered motion per frame. Nothing when the memory has no homography, or when `next_t_ns` is not
+/// about one interval later (frames were lost or the source paused): then there is no basis to predict.
+std::optional<std::vector<cv::Point2f>>
+predict_positions(const TrackSet &tracks, const std::vector<cv::KeyPoint> &keypoints, int64_t next_t_ns);
 
 /// True when a followed point's remembered own motion clears the gate.
 bool memory_says_moving(const TrackState &state, const ClassifierParams &classifier, const TemporalParams &params);

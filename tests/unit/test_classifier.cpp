@@ -237,3 +237,40 @@ TEST(Matching, OnePassBruteForceAgreesWithOpenCv)
 	EXPECT_GE(agree, expected * 98 / 100);
 	EXPECT_LE(ours.size(), expected + expected / 50);
 }
+
+TEST(Matching, GuidedFindsTheSameCorrectMatchesAndNoFarLookAlikes)
+{
+	// Frame b is frame a shifted by (12, -5) px, so every true match is known; a copy of one region is
+	// pasted 200 px away, a look-alike that brute force can pair across the image.
+	const cv::Mat a = textured_image(640, 480, 21);
+	cv::Mat b;
+	const cv::Matx23d shift(1, 0, 12, 0, 1, -5);
+	cv::warpAffine(a, b, shift, a.size(), cv::INTER_LINEAR, cv::BORDER_REFLECT);
+	b(cv::Rect(60, 60, 120, 120)).copyTo(b(cv::Rect(260, 260, 120, 120)));
+	FeatureParams params;
+	params.max_features = 800;
+	const FrameFeatures fa = extract_features(a, params, 1), fb = extract_features(b, params, 1);
+	std::vector<cv::Point2f> predicted;
+	for (const auto &k : fa.keypoints)
+		predicted.push_back(k.pt + cv::Point2f(12, -5));
+	MatchParams mp;
+	mp.search_radius_px = 16;
+	const auto guided = match_features_guided(fa, fb, predicted, mp);
+	auto far_off = [&](const Match &m) {
+		const cv::Point2f error =
+			fb.keypoints[static_cast<size_t>(m.cur)].pt - predicted[static_cast<size_t>(m.prev)];
+		return error.dot(error) > 4.0F * 4.0F;
+	};
+	const auto wrong = std::count_if(guided.begin(), guided.end(), far_off);
+	ASSERT_GT(guided.size(), 200U);
+	EXPECT_EQ(wrong, 0) << "a guided match is never farther than the radius, and none of these is wrong";
+	// Brute force finds at least as many wrong ones (the pasted copy) and no more right ones.
+	mp.search_radius_px = 0;
+	const auto brute = match_features(fa, fb, mp);
+	const auto brute_right = static_cast<long>(brute.size()) - std::count_if(brute.begin(), brute.end(), far_off);
+	EXPECT_GE(static_cast<long>(guided.size()), brute_right);
+	// A prediction that cannot be made matches nothing.
+	std::vector<cv::Point2f> none(fa.keypoints.size(), cv::Point2f(std::nanf(""), 0));
+	mp.search_radius_px = 16;
+	EXPECT_TRUE(match_features_guided(fa, fb, none, mp).empty());
+}

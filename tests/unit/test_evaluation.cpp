@@ -10,7 +10,9 @@ TEST(Evaluation, ScoresLabelsAgainstTheMask)
 	cv::Mat mask = cv::Mat::zeros(100, 100, CV_8UC1);
 	mask(cv::Rect(50, 50, 50, 50)).setTo(3); // a mover in the bottom-right quarter
 	FrameResult r;
-	auto point = [](float u, float v, PointLabel label) { return LabelledPoint{u, v, label, u, v, 0, std::nullopt}; };
+	auto point = [](float u, float v, PointLabel label) {
+		return LabelledPoint{u, v, label, u, v, 0, std::nullopt};
+	};
 	r.points = {point(60, 60, PointLabel::Dynamic),	 point(70, 70, PointLabel::Dynamic), // true dynamic
 		    point(10, 10, PointLabel::Dynamic),					     // false dynamic
 		    point(80, 80, PointLabel::Static),					     // missed

@@ -32,7 +32,8 @@ struct Follower {
 		std::vector<PointPair> pairs;
 		for (size_t i = 0; i < cur_positions.size(); ++i) {
 			matches.push_back({static_cast<int>(i), static_cast<int>(i), 0});
-			pairs.push_back({prev_positions[i], cur_positions[i], cv::Vec3f::all(128), cv::Vec3f::all(128)});
+			pairs.push_back(
+				{prev_positions[i], cur_positions[i], cv::Vec3f::all(128), cv::Vec3f::all(128)});
 		}
 		t_ns += kFrameNs;
 		FollowInput input;
