@@ -115,7 +115,8 @@ int main(int argc, char **argv)
 	// The classification step alone (everything after matching), on the matches of two real frames: the
 	// image and a slightly rotated, shifted copy with a patch moved, so all branches run.
 	cv::Mat next;
-	cv::warpAffine(colour, next, cv::getRotationMatrix2D(cv::Point2f(512, 384), 1.0, 1.0), colour.size());
+	const cv::Mat rotation = cv::getRotationMatrix2D(cv::Point2f(512, 384), 1.0, 1.0);
+	cv::warpAffine(colour, next, rotation, colour.size());
 	colour(cv::Rect(100, 100, 200, 300)).copyTo(next(cv::Rect(130, 105, 200, 300)));
 	vision::FeatureParams fp;
 	fp.max_features = 1500;
@@ -128,6 +129,17 @@ int main(int argc, char **argv)
 				 f1.colours[static_cast<size_t>(m.cur)]});
 	const Timing match_t =
 		measure(repeats, [&] { return vision::match_features(f0, f1, vision::MatchParams{}).size(); });
+	// Guided matching with the scene's motion as the prediction (what the pipeline has from the frame before).
+	std::vector<cv::Point2f> predicted;
+	for (const auto &k : f0.keypoints) {
+		const cv::Matx23d r(rotation);
+		predicted.emplace_back(static_cast<float>(r(0, 0) * k.pt.x + r(0, 1) * k.pt.y + r(0, 2)),
+				       static_cast<float>(r(1, 0) * k.pt.x + r(1, 1) * k.pt.y + r(1, 2)));
+	}
+	const Timing guided_t = measure(repeats, [&] {
+		return vision::match_features_guided(f0, f1, predicted, vision::MatchParams{}).size();
+	});
+	const size_t guided_count = vision::match_features_guided(f0, f1, predicted, vision::MatchParams{}).size();
 	const Timing classify_t = measure(
 		repeats * 4, [&] { return vision::classify(pairs, next, vision::ClassifierParams{}).labels.size(); });
 	// The same plus the motion memory (temporal.hpp), which follows every match from a previous memory.
@@ -158,6 +170,10 @@ int main(int argc, char **argv)
 	std::printf("\n| step | input | median ms | best ms |\n|---|---|---|---|\n");
 	std::printf("| matching (one-pass brute force, ratio + cross check) | %zu x %zu ORB | %.2f | %.2f |\n",
 		    f0.keypoints.size(), f1.keypoints.size(), match_t.median_ms, match_t.best_ms);
+	std::printf(
+		"| matching guided (64 px around the prediction; %zu vs %zu matches) | %zu x %zu ORB | %.2f | %.2f |\n",
+		guided_count, matches.size(), f0.keypoints.size(), f1.keypoints.size(), guided_t.median_ms,
+		guided_t.best_ms);
 	std::printf("| classification (seed 000, all steps after matching) | %zu matches | %.2f | %.2f |\n",
 		    pairs.size(), classify_t.median_ms, classify_t.best_ms);
 	std::printf("| classification + motion memory (all after matching, as the pipeline runs it) | %zu matches | "

@@ -96,6 +96,36 @@ LabelScore score_frame(const FrameResult &result, const cv::Mat &mask, int borde
 	return score;
 }
 
+double MoverCounts::recall() const
+{
+	return ratio(dynamic, dynamic + static_);
+}
+
+void count_per_mover(const FrameResult &result, const cv::Mat &mask, std::map<int, MoverCounts> &counts)
+{
+	CV_Assert(mask.type() == CV_8UC1);
+	for (const auto &point : result.points) {
+		const int x = cvRound(point.u), y = cvRound(point.v);
+		if (x < 0 || y < 0 || x >= mask.cols || y >= mask.rows)
+			continue;
+		const int id = mask.at<uint8_t>(y, x);
+		if (id == 0)
+			continue;
+		MoverCounts &c = counts[id];
+		switch (point.label) {
+		case PointLabel::Dynamic:
+			++c.dynamic;
+			break;
+		case PointLabel::Static:
+			++c.static_;
+			break;
+		case PointLabel::Uncertain:
+			++c.uncertain;
+			break;
+		}
+	}
+}
+
 std::string score_table_header()
 {
 	return "| scene | frames | decided points | dynamic precision | dynamic recall | dynamic F1 | static error "

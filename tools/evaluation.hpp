@@ -2,6 +2,7 @@
 // Scoring labelled points against per-pixel dynamic masks (ground truth): precision, recall and F1 of the
 // `dynamic` label, and the static-point error rate. Pure: masks and results in, numbers out.
 #include <cstdint>
+#include <map>
 #include <string>
 
 #include <opencv2/core.hpp>
@@ -34,6 +35,16 @@ struct LabelScore {
 /// Scores one frame's points; `mask` is CV_8UC1, non-zero on movers. Points within `border_px` of a mask
 /// edge are skipped (their label is ambiguous: the descriptor patch straddles mover and scene).
 LabelScore score_frame(const FrameResult &result, const cv::Mat &mask, int border_px = 0);
+
+/// Labels of the points on each mover, by the mover's id in the mask (the sim writes ids 1..N): shows which
+/// mover a method misses (recall per mover = dynamic / (dynamic + static)).
+struct MoverCounts {
+	uint64_t dynamic = 0;
+	uint64_t static_ = 0;
+	uint64_t uncertain = 0;
+	[[nodiscard]] double recall() const;
+};
+void count_per_mover(const FrameResult &result, const cv::Mat &mask, std::map<int, MoverCounts> &counts);
 
 /// A table row: "name frames points P R F1 static-error uncertain coverage".
 std::string format_score_row(const std::string &name, const LabelScore &score);

@@ -4,6 +4,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <iomanip>
 #include <iostream>
 #include <sys/socket.h>
 #include <sys/un.h>
@@ -188,10 +189,11 @@ cv::Mat load_mask(const fs::path &dir, uint64_t seq)
 }
 
 int eval(const std::string &results_path, const std::string &truth_dir, const std::string &name, int border_px,
-	 double min_coverage, const std::string &per_frame_csv, bool json_out)
+	 double min_coverage, const std::string &per_frame_csv, bool json_out, bool per_mover)
 {
 	const auto results = tools::read_results(results_path);
 	tools::LabelScore all, covered;
+	std::map<int, tools::MoverCounts> movers;
 	uint64_t missing = 0;
 	std::ofstream csv;
 	if (!per_frame_csv.empty()) {
@@ -207,6 +209,8 @@ int eval(const std::string &results_path, const std::string &truth_dir, const st
 			continue;
 		}
 		const auto score = tools::score_frame(result, mask, border_px);
+		if (per_mover)
+			tools::count_per_mover(result, mask, movers);
 		all += score;
 		if (score.mean_coverage() >= min_coverage)
 			covered += score;
@@ -248,6 +252,12 @@ int eval(const std::string &results_path, const std::string &truth_dir, const st
 			     name + " (movers >= " + std::to_string(static_cast<int>(min_coverage * 100)) + "%)",
 			     covered)
 		  << "\n";
+	if (per_mover) {
+		std::cout << "\n| mover (mask id) | dynamic | static | uncertain | recall |\n|---|---|---|---|---|\n";
+		for (const auto &[id, c] : movers)
+			std::cout << "| " << id << " | " << c.dynamic << " | " << c.static_ << " | " << c.uncertain
+				  << " | " << std::fixed << std::setprecision(3) << c.recall() << " |\n";
+	}
 	if (missing)
 		std::cerr << "stereoctl eval: " << missing << " frames had no mask\n";
 	return 0;
@@ -486,6 +496,8 @@ int main(int argc, char **argv)
 	eval_cmd->add_option("--min-coverage", eval_coverage, "second row: frames whose movers cover at least this");
 	eval_cmd->add_option("--per-frame", eval_csv, "write per-frame scores to this CSV");
 	eval_cmd->add_flag("--json", eval_json, "print one JSON object instead of the table");
+	bool eval_per_mover = false;
+	eval_cmd->add_flag("--per-mover", eval_per_mover, "also a table of labels per mover (mask id)");
 
 	auto *render_cmd = app.add_subcommand("render", "draw results onto the input's frames");
 	tools::SourceOptions render_opts;
@@ -515,7 +527,7 @@ int main(int argc, char **argv)
 			return info(info_path);
 		if (*eval_cmd)
 			return eval(eval_results, eval_truth, eval_name, eval_border, eval_coverage, eval_csv,
-				    eval_json);
+				    eval_json, eval_per_mover);
 		if (*render_cmd)
 			return render(render_opts, render_results, render_truth, render_out, render_video, render_sheet,
 				      render_sheet_frames, render_every, render_arrows);

@@ -43,3 +43,28 @@ TEST(Evaluation, BorderSkipsPointsOnTheOutline)
 	EXPECT_EQ(bordered.static_false, 0U);
 	EXPECT_EQ(bordered.dynamic_true, 1U);
 }
+
+TEST(Evaluation, CountsLabelsPerMover)
+{
+	cv::Mat mask = cv::Mat::zeros(100, 100, CV_8UC1);
+	mask(cv::Rect(0, 0, 20, 20)).setTo(1);
+	mask(cv::Rect(60, 60, 20, 20)).setTo(2);
+	FrameResult r;
+	auto point = [](float u, float v, PointLabel label) {
+		return LabelledPoint{u, v, label, u, v, 0, std::nullopt};
+	};
+	r.points = {point(5, 5, PointLabel::Dynamic), point(6, 6, PointLabel::Static),
+		    point(70, 70, PointLabel::Static), point(71, 71, PointLabel::Uncertain),
+		    point(50, 50, PointLabel::Dynamic)}; // the last: scene
+	std::map<int, MoverCounts> counts;
+	count_per_mover(r, mask, counts);
+	count_per_mover(r, mask, counts); // accumulates over frames
+	ASSERT_EQ(counts.size(), 2U);
+	EXPECT_EQ(counts[1].dynamic, 2U);
+	EXPECT_EQ(counts[1].static_, 2U);
+	EXPECT_NEAR(counts[1].recall(), 0.5, 1e-12);
+	EXPECT_EQ(counts[2].dynamic, 0U);
+	EXPECT_EQ(counts[2].static_, 2U);
+	EXPECT_EQ(counts[2].uncertain, 2U);
+	EXPECT_EQ(counts[2].recall(), 0.0);
+}
