@@ -58,6 +58,68 @@ void hamming_rows(const uint64_t *query, const uint64_t *train, int train_rows, 
 	chosen(query, train, train_rows, words, out);
 }
 
+/// Best and second-best per row and best per column over the candidate pairs a caller visits, then the ratio
+/// test, max distance and cross check: the filtering shared by the brute-force and guided binary matchers.
+template <typename Distance>
+class CandidateTable
+{
+public:
+	CandidateTable(int n_prev, int n_cur)
+		: rows_(static_cast<size_t>(n_prev)), col_best_(static_cast<size_t>(n_cur), kNone),
+		  col_arg_(static_cast<size_t>(n_cur), kUnset)
+	{
+	}
+	void add(int i, int j, Distance d) { add_to(rows_[static_cast<size_t>(i)], i, j, d); }
+	/// Row i against every column: the brute-force case, with the row's state held across the loop.
+	void add_row(int i, const Distance *distances, int n)
+	{
+		Row &r = rows_[static_cast<size_t>(i)];
+		for (int j = 0; j < n; ++j)
+			add_to(r, i, j, distances[j]);
+	}
+	[[nodiscard]] std::vector<Match> matches(const MatchParams &params, Distance max_distance) const
+	{
+		std::vector<Match> out;
+		for (size_t i = 0; i < rows_.size(); ++i) {
+			const Row &r = rows_[i];
+			if (r.arg == kUnset || r.best > max_distance)
+				continue;
+			if (r.second != kNone &&
+			    static_cast<float>(r.best) > params.ratio * static_cast<float>(r.second))
+				continue;
+			if (params.cross_check && col_arg_[static_cast<size_t>(r.arg)] != static_cast<int>(i))
+				continue;
+			out.push_back({static_cast<int>(i), r.arg, static_cast<float>(r.best)});
+		}
+		return out;
+	}
+
+private:
+	struct Row;
+	void add_to(Row &r, int i, int j, Distance d)
+	{
+		if (d < r.best) {
+			r.second = r.best;
+			r.best = d;
+			r.arg = j;
+		} else if (d < r.second) {
+			r.second = d;
+		}
+		if (d < col_best_[static_cast<size_t>(j)]) {
+			col_best_[static_cast<size_t>(j)] = d;
+			col_arg_[static_cast<size_t>(j)] = i;
+		}
+	}
+	static constexpr Distance kNone = std::numeric_limits<Distance>::max();
+	struct Row {
+		Distance best = kNone, second = kNone;
+		int arg = kUnset;
+	};
+	std::vector<Row> rows_;
+	std::vector<Distance> col_best_;
+	std::vector<int> col_arg_;
+};
+
 /// Brute force in one pass over the distance matrix: each query row's two nearest (for the ratio test) and
 /// each train row's nearest (for the cross check) come from the same distances, computed once.
 std::vector<Match> match_binary(const cv::Mat &prev, const cv::Mat &cur, const MatchParams &params)
@@ -69,44 +131,12 @@ std::vector<Match> match_binary(const cv::Mat &prev, const cv::Mat &cur, const M
 	const cv::Mat cur_words = cur.isContinuous() ? cur : cur.clone();
 	const int n_prev = prev.rows, n_cur = cur.rows;
 	std::vector<int> distances(static_cast<size_t>(n_cur));
-	std::vector<int> col_best(static_cast<size_t>(n_cur), std::numeric_limits<int>::max());
-	std::vector<int> col_arg(static_cast<size_t>(n_cur), kUnset);
-	struct RowBest {
-		int best = std::numeric_limits<int>::max(), second = std::numeric_limits<int>::max(), arg = kUnset;
-	};
-	std::vector<RowBest> rows(static_cast<size_t>(n_prev));
+	CandidateTable<int> table(n_prev, n_cur);
 	for (int i = 0; i < n_prev; ++i) {
 		hamming_rows(prev_words.ptr<uint64_t>(i), cur_words.ptr<uint64_t>(0), n_cur, words, distances.data());
-		RowBest &r = rows[static_cast<size_t>(i)];
-		for (int j = 0; j < n_cur; ++j) {
-			const int d = distances[static_cast<size_t>(j)];
-			if (d < r.best) {
-				r.second = r.best;
-				r.best = d;
-				r.arg = j;
-			} else if (d < r.second) {
-				r.second = d;
-			}
-			if (d < col_best[static_cast<size_t>(j)]) {
-				col_best[static_cast<size_t>(j)] = d;
-				col_arg[static_cast<size_t>(j)] = i;
-			}
-		}
+		table.add_row(i, distances.data(), n_cur);
 	}
-	std::vector<Match> matches;
-	matches.reserve(static_cast<size_t>(n_prev));
-	for (int i = 0; i < n_prev; ++i) {
-		const RowBest &r = rows[static_cast<size_t>(i)];
-		if (r.arg == kUnset || r.best > params.max_distance)
-			continue;
-		if (r.second != std::numeric_limits<int>::max() &&
-		    static_cast<float>(r.best) > params.ratio * static_cast<float>(r.second))
-			continue;
-		if (params.cross_check && col_arg[static_cast<size_t>(r.arg)] != i)
-			continue;
-		matches.push_back({i, r.arg, static_cast<float>(r.best)});
-	}
-	return matches;
+	return table.matches(params, params.max_distance);
 }
 
 /// Float descriptors (SURF) through OpenCV's matcher.
@@ -137,58 +167,6 @@ std::vector<Match> match_float(const cv::Mat &prev, const cv::Mat &cur, const Ma
 	}
 	return matches;
 }
-
-/// Best and second-best per row and best per column over the candidate pairs a caller visits, then the ratio
-/// test, max distance and cross check: the filtering shared by both guided matchers.
-class CandidateTable
-{
-public:
-	CandidateTable(int n_prev, int n_cur)
-		: rows_(static_cast<size_t>(n_prev)), col_best_(static_cast<size_t>(n_cur), kNone),
-		  col_arg_(static_cast<size_t>(n_cur), kUnset)
-	{
-	}
-	void add(int i, int j, float d)
-	{
-		Row &r = rows_[static_cast<size_t>(i)];
-		if (d < r.best) {
-			r.second = r.best;
-			r.best = d;
-			r.arg = j;
-		} else if (d < r.second) {
-			r.second = d;
-		}
-		if (d < col_best_[static_cast<size_t>(j)]) {
-			col_best_[static_cast<size_t>(j)] = d;
-			col_arg_[static_cast<size_t>(j)] = i;
-		}
-	}
-	[[nodiscard]] std::vector<Match> matches(const MatchParams &params, float max_distance) const
-	{
-		std::vector<Match> out;
-		for (size_t i = 0; i < rows_.size(); ++i) {
-			const Row &r = rows_[i];
-			if (r.arg == kUnset || r.best > max_distance)
-				continue;
-			if (r.second != kNone && r.best > params.ratio * r.second)
-				continue;
-			if (params.cross_check && col_arg_[static_cast<size_t>(r.arg)] != static_cast<int>(i))
-				continue;
-			out.push_back({static_cast<int>(i), r.arg, r.best});
-		}
-		return out;
-	}
-
-private:
-	static constexpr float kNone = std::numeric_limits<float>::max();
-	struct Row {
-		float best = kNone, second = kNone;
-		int arg = kUnset;
-	};
-	std::vector<Row> rows_;
-	std::vector<float> col_best_;
-	std::vector<int> col_arg_;
-};
 
 /// Keypoints of one frame binned on a square grid of the search radius, so the candidates near a point are
 /// in the 3 x 3 cells around it.
@@ -244,7 +222,7 @@ std::vector<Match> match_features_guided(const FrameFeatures &prev, const FrameF
 	const float radius = params.search_radius_px;
 	const float radius2 = radius * radius;
 	const KeypointGrid grid(cur.keypoints, radius);
-	CandidateTable table(prev.descriptors.rows, cur.descriptors.rows);
+	CandidateTable<float> table(prev.descriptors.rows, cur.descriptors.rows);
 	const bool binary =
 		cur.norm_type == cv::NORM_HAMMING && prev.descriptors.type() == CV_8U && prev.descriptors.cols % 8 == 0;
 	const cv::Mat prev_d = prev.descriptors.isContinuous() ? prev.descriptors : prev.descriptors.clone();
