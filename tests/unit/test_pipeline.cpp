@@ -58,10 +58,18 @@ TEST(Pipeline, DropOldestCountsWhatASlowConsumerLoses)
 	options.ring_capacity = 2;
 	options.overflow = OverflowPolicy::DropOldest;
 	options.motion.enabled = false;
+	// The consumer stalls on its first frame until the source has delivered all 60, so drops are certain
+	// however slow the machine (a sanitizer build on a busy CI host renders the sim slower than 15 ms).
+	Pipeline *self = nullptr;
 	Pipeline pipeline(small_sim(60, true, 200), options, [&](FrameResult &r) {
+		if (published.empty()) {
+			const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+			while (self->stats().frames_captured < 60 && std::chrono::steady_clock::now() < give_up)
+				std::this_thread::sleep_for(std::chrono::milliseconds(2));
+		}
 		published.push_back(r.seq);
-		std::this_thread::sleep_for(std::chrono::milliseconds(15)); // far slower than 200 fps
 	});
+	self = &pipeline;
 	pipeline.start();
 	pipeline.wait();
 	const auto stats = pipeline.stats();
@@ -86,7 +94,16 @@ TEST(Pipeline, StopDrainsWhatWasCaptured)
 		++count;
 	});
 	pipeline.start();
-	std::this_thread::sleep_for(std::chrono::milliseconds(300));
+	// Stop mid-stream: once a few frames are out (however slow the build), with more on their way.
+	const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+	for (;;) {
+		{
+			std::lock_guard lock(m);
+			if (count > 5 || std::chrono::steady_clock::now() > give_up)
+				break;
+		}
+		std::this_thread::sleep_for(std::chrono::milliseconds(5));
+	}
 	pipeline.request_stop();
 	pipeline.wait();
 	EXPECT_EQ(count, pipeline.stats().frames_captured) << "nothing captured is lost on stop";
