@@ -20,7 +20,21 @@
 namespace stereod::daemon {
 namespace {
 
-sockaddr_un address_of(const std::string &path)
+/// True when something accepts connections at `path` (so it is not ours to remove).
+bool someone_listens(const std::string &path)
+{
+	const int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+	if (fd < 0)
+		return false;
+	const sockaddr_un addr = unix_socket_address(path);
+	const bool listening = ::connect(fd, reinterpret_cast<const sockaddr *>(&addr), sizeof(addr)) == 0;
+	::close(fd);
+	return listening;
+}
+
+} // namespace
+
+sockaddr_un unix_socket_address(const std::string &path)
 {
 	sockaddr_un addr{};
 	addr.sun_family = AF_UNIX;
@@ -31,23 +45,9 @@ sockaddr_un address_of(const std::string &path)
 	return addr;
 }
 
-/// True when something accepts connections at `path` (so it is not ours to remove).
-bool someone_listens(const std::string &path)
-{
-	const int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
-	if (fd < 0)
-		return false;
-	const sockaddr_un addr = address_of(path);
-	const bool listening = ::connect(fd, reinterpret_cast<const sockaddr *>(&addr), sizeof(addr)) == 0;
-	::close(fd);
-	return listening;
-}
-
-} // namespace
-
 SocketServer::SocketServer(SocketServerOptions options) : options_(std::move(options))
 {
-	const sockaddr_un addr = address_of(options_.path);
+	const sockaddr_un addr = unix_socket_address(options_.path);
 	std::error_code ec;
 	const auto parent = std::filesystem::path(options_.path).parent_path();
 	if (!parent.empty())

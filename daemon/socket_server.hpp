@@ -12,7 +12,13 @@
 #include <string>
 #include <thread>
 
+#include <sys/un.h>
+
 namespace stereod::daemon {
+
+/// The address of a Unix socket file, for bind or connect; throws std::runtime_error naming the path when it
+/// is empty or longer than sockaddr_un holds (instead of silently cutting it).
+sockaddr_un unix_socket_address(const std::string &path);
 
 struct SocketServerOptions {
 	std::string path;

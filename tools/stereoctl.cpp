@@ -20,6 +20,7 @@
 
 #include "core/clock.hpp"
 #include "core/protocol.hpp"
+#include "daemon/socket_server.hpp"
 #include "drivers/replay/recording.hpp"
 #include "tools/common.hpp"
 #include "tools/evaluation.hpp"
@@ -49,10 +50,8 @@ void add_source_options(CLI::App &cmd, tools::SourceOptions &options)
 // ---------------------------------------------------------------------------------------------- watch
 int watch(const std::string &socket_path, bool raw, long max_frames, double timeout_s)
 {
+	const sockaddr_un addr = daemon::unix_socket_address(socket_path);
 	const int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
-	sockaddr_un addr{};
-	addr.sun_family = AF_UNIX;
-	std::strncpy(addr.sun_path, socket_path.c_str(), sizeof(addr.sun_path) - 1);
 	if (::connect(fd, reinterpret_cast<const sockaddr *>(&addr), sizeof(addr)) != 0) {
 		std::cerr << "stereoctl watch: cannot connect to " << socket_path << ": " << std::strerror(errno)
 			  << " (is stereod running? see output.socket)\n";

@@ -29,9 +29,7 @@ std::string socket_path(const std::string &name)
 int connect_to(const std::string &path)
 {
 	const int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
-	sockaddr_un addr{};
-	addr.sun_family = AF_UNIX;
-	std::strncpy(addr.sun_path, path.c_str(), sizeof(addr.sun_path) - 1);
+	const sockaddr_un addr = unix_socket_address(path);
 	EXPECT_EQ(::connect(fd, reinterpret_cast<const sockaddr *>(&addr), sizeof(addr)), 0) << std::strerror(errno);
 	timeval tv{2, 0};
 	::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof(tv));
@@ -202,9 +200,7 @@ TEST(SocketServer, ReplacesAStaleSocketButNotALiveOne)
 	{
 		// A socket file nobody listens on, as a crashed daemon leaves behind.
 		const int fd = ::socket(AF_UNIX, SOCK_STREAM, 0);
-		sockaddr_un addr{};
-		addr.sun_family = AF_UNIX;
-		std::strncpy(addr.sun_path, path.c_str(), sizeof(addr.sun_path) - 1);
+		const sockaddr_un addr = unix_socket_address(path);
 		ASSERT_EQ(::bind(fd, reinterpret_cast<const sockaddr *>(&addr), sizeof(addr)), 0);
 		::close(fd);
 	}
