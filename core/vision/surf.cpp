@@ -231,28 +231,46 @@ void describe(const Integral &integral, const SurfKeypoint &kp, bool extended, f
 			const float dx = integral.haar_x(py, px, haar), dy = integral.haar_y(py, px, haar);
 			const float du = w * (dx * co + dy * si);
 			const float dv = w * (-dx * si + dy * co);
-			const int cell = ((j + 10) / 5) * 4 + (i + 10) / 5;
-			if (!extended) {
-				float *d = out + cell * 4;
-				d[0] += du;
-				d[1] += dv;
-				d[2] += std::abs(du);
-				d[3] += std::abs(dv);
-			} else {
-				float *d = out + cell * 8;
-				if (dv >= 0) {
-					d[0] += du;
-					d[1] += std::abs(du);
-				} else {
-					d[2] += du;
-					d[3] += std::abs(du);
-				}
-				if (du >= 0) {
-					d[4] += dv;
-					d[5] += std::abs(dv);
-				} else {
-					d[6] += dv;
-					d[7] += std::abs(dv);
+			// Soft binning: a sample near a subregion's edge shares itself with the neighbour, bilinearly,
+			// so a small rotation or shift moves weight between cells gradually instead of all at once.
+			const float cu = (static_cast<float>(i + 10) + 0.5F) / 5.0F - 0.5F;
+			const float cv_ = (static_cast<float>(j + 10) + 0.5F) / 5.0F - 0.5F;
+			const int cu0 = static_cast<int>(std::floor(cu)), cv0 = static_cast<int>(std::floor(cv_));
+			const float fu = cu - static_cast<float>(cu0), fv = cv_ - static_cast<float>(cv0);
+			for (int bv = 0; bv < 2; ++bv) {
+				const int cy = cv0 + bv;
+				if (cy < 0 || cy > 3)
+					continue;
+				for (int bu = 0; bu < 2; ++bu) {
+					const int cx = cu0 + bu;
+					if (cx < 0 || cx > 3)
+						continue;
+					const float share = (bu != 0 ? fu : 1 - fu) * (bv != 0 ? fv : 1 - fv);
+					const float su = share * du, sv = share * dv;
+					const int cell = cy * 4 + cx;
+					if (!extended) {
+						float *d = out + cell * 4;
+						d[0] += su;
+						d[1] += sv;
+						d[2] += std::abs(su);
+						d[3] += std::abs(sv);
+					} else {
+						float *d = out + cell * 8;
+						if (dv >= 0) {
+							d[0] += su;
+							d[1] += std::abs(su);
+						} else {
+							d[2] += su;
+							d[3] += std::abs(su);
+						}
+						if (du >= 0) {
+							d[4] += sv;
+							d[5] += std::abs(sv);
+						} else {
+							d[6] += sv;
+							d[7] += std::abs(sv);
+						}
+					}
 				}
 			}
 		}
