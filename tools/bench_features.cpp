@@ -160,7 +160,7 @@ int main(int argc, char **argv)
 		follow.matches = matches;
 		follow.pairs = pairs;
 		follow.homography = classification.homography ? &*classification.homography : nullptr;
-		follow.cur_image = &next;
+		follow.texture_agrees = classification.texture_agrees;
 		follow.cur_keypoints = f1.keypoints.size();
 		follow.t_ns = 33'333'333;
 		const vision::TrackSet memory = vision::follow_tracks(&previous_memory, follow, cp, tp);

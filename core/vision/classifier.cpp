@@ -150,11 +150,13 @@ Classification classify(std::span<const PointPair> pairs, const cv::Mat &cur_ima
 	std::erase_if(static_set, [&](size_t i) { return !static_window.contains(displacement[i]); });
 	out.counts.static_after_area = static_cast<int>(static_set.size());
 
-	// 4. Static texture constraint (eqs. 2-4): the two ends of a static match look alike.
-	auto same_texture = [&](size_t i) {
-		return texture_distance_near(pairs[i].prev_colour, cur_image, pairs[i].cur, params) <
-		       params.texture_threshold;
-	};
+	// 4. Static texture constraint (eqs. 2-4): the two ends of a static match look alike. Evaluated once for
+	// every pair: step 6 and the motion memory ask the same question.
+	out.texture_agrees.resize(n);
+	for (size_t i = 0; i < n; ++i)
+		out.texture_agrees[i] = texture_distance_near(pairs[i].prev_colour, cur_image, pairs[i].cur, params) <
+					params.texture_threshold;
+	auto same_texture = [&](size_t i) { return out.texture_agrees[i] != 0; };
 	std::erase_if(static_set, [&](size_t i) { return !same_texture(i); });
 	out.counts.static_after_texture = static_cast<int>(static_set.size());
 	for (size_t i : static_set)

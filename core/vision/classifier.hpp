@@ -102,6 +102,7 @@ struct ClassificationCounts {
 struct Classification {
 	std::vector<PointLabel> labels;	       ///< one per input pair
 	std::optional<cv::Matx33d> homography; ///< the refined frame-to-frame homography (step 5)
+	std::vector<uint8_t> texture_agrees; ///< per pair: eq. 3 (within the tolerance) < T; empty without a homography
 	int homography_inliers = 0;
 	ClassificationCounts counts;
 };

@@ -59,7 +59,7 @@ void hamming_rows(const uint64_t *query, const uint64_t *train, int train_rows, 
 }
 
 /// Best and second-best per row and best per column over the candidate pairs a caller visits, then the ratio
-/// test, max distance and cross check: the filtering shared by the brute-force and guided binary matchers.
+/// test, max distance and cross check: the filtering shared by brute-force (binary) and guided matching.
 template <typename Distance>
 class CandidateTable
 {
@@ -175,17 +175,16 @@ class KeypointGrid
 public:
 	KeypointGrid(const std::vector<cv::KeyPoint> &keypoints, float cell) : cell_(cell)
 	{
-		order_.resize(keypoints.size());
-		keys_.resize(keypoints.size());
-		for (size_t j = 0; j < keypoints.size(); ++j) {
-			order_[j] = static_cast<int>(j);
-			keys_[j] = key(cell_of(keypoints[j].pt.x), cell_of(keypoints[j].pt.y));
+		std::vector<std::pair<int64_t, int>> keyed(keypoints.size());
+		for (size_t j = 0; j < keypoints.size(); ++j)
+			keyed[j] = {key(cell_of(keypoints[j].pt.x), cell_of(keypoints[j].pt.y)), static_cast<int>(j)};
+		std::sort(keyed.begin(), keyed.end());
+		sorted_keys_.reserve(keyed.size());
+		order_.reserve(keyed.size());
+		for (const auto &[k, j] : keyed) {
+			sorted_keys_.push_back(k);
+			order_.push_back(j);
 		}
-		std::sort(order_.begin(), order_.end(),
-			  [&](int a, int b) { return keys_[static_cast<size_t>(a)] < keys_[static_cast<size_t>(b)]; });
-		sorted_keys_.resize(order_.size());
-		for (size_t k = 0; k < order_.size(); ++k)
-			sorted_keys_[k] = keys_[static_cast<size_t>(order_[k])];
 	}
 	/// Calls visit(j) for every keypoint in the cells around `at` (a superset of those within one cell).
 	template <typename Visit>
@@ -206,9 +205,16 @@ private:
 	[[nodiscard]] int64_t cell_of(float v) const { return static_cast<int64_t>(std::floor(v / cell_)); }
 	static int64_t key(int64_t x, int64_t y) { return (y << 32) + x; }
 	float cell_;
-	std::vector<int> order_;
-	std::vector<int64_t> keys_, sorted_keys_;
+	std::vector<int64_t> sorted_keys_; ///< cell keys in ascending order
+	std::vector<int> order_;	   ///< the keypoint index of each sorted key
 };
+
+/// Descriptors compared by Hamming distance on 64-bit words (ORB); anything else goes by its float norm.
+bool binary_descriptors(const FrameFeatures &prev, const FrameFeatures &cur)
+{
+	return cur.norm_type == cv::NORM_HAMMING && prev.descriptors.type() == CV_8U &&
+	       prev.descriptors.cols % 8 == 0 && prev.descriptors.cols == cur.descriptors.cols;
+}
 
 } // namespace
 
@@ -223,8 +229,7 @@ std::vector<Match> match_features_guided(const FrameFeatures &prev, const FrameF
 	const float radius2 = radius * radius;
 	const KeypointGrid grid(cur.keypoints, radius);
 	CandidateTable<float> table(prev.descriptors.rows, cur.descriptors.rows);
-	const bool binary =
-		cur.norm_type == cv::NORM_HAMMING && prev.descriptors.type() == CV_8U && prev.descriptors.cols % 8 == 0;
+	const bool binary = binary_descriptors(prev, cur);
 	const cv::Mat prev_d = prev.descriptors.isContinuous() ? prev.descriptors : prev.descriptors.clone();
 	const cv::Mat cur_d = cur.descriptors.isContinuous() ? cur.descriptors : cur.descriptors.clone();
 	const int words = prev_d.cols / 8;
@@ -256,8 +261,7 @@ std::vector<Match> match_features(const FrameFeatures &prev, const FrameFeatures
 {
 	if (prev.descriptors.empty() || cur.descriptors.empty())
 		return {};
-	if (cur.norm_type == cv::NORM_HAMMING && prev.descriptors.type() == CV_8U && prev.descriptors.cols % 8 == 0 &&
-	    prev.descriptors.cols == cur.descriptors.cols)
+	if (binary_descriptors(prev, cur))
 		return match_binary(prev.descriptors, cur.descriptors, params);
 	return match_float(prev.descriptors, cur.descriptors, params, cur.norm_type);
 }

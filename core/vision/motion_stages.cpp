@@ -48,10 +48,8 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 	follow.matches = matches;
 	follow.pairs = pairs;
 	follow.homography = classification.homography ? &*classification.homography : nullptr;
-	follow.cur_image = &frame.left;
+	follow.texture_agrees = classification.texture_agrees;
 	TrackSet tracks = follow_tracks(prev_tracks, follow, params.classifier, params.temporal);
-	tracks.homography = classification.homography;
-	tracks.interval_ns = prev_tracks != nullptr ? frame.device_ns - prev_tracks->t_ns : 0;
 	promote_remembered_movers(classification.labels, matches, tracks, params.classifier, params.temporal);
 	result.points.reserve(pairs.size());
 	for (size_t i = 0; i < pairs.size(); ++i) {

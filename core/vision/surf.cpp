@@ -215,6 +215,28 @@ float orientation(const Integral &integral, const SurfKeypoint &kp)
 	return best_angle;
 }
 
+/// Adds `share` of one rotated Haar sample (du, dv) to subregion `cell`: sum du, sum dv, sum |du|, sum |dv|
+/// (64-d), or the extended 128-d split of du by the sign of dv and of dv by the sign of du.
+void add_to_cell(float *out, int cell, float du, float dv, float share, bool extended)
+{
+	const float su = share * du, sv = share * dv;
+	if (!extended) {
+		float *d = out + cell * 4;
+		d[0] += su;
+		d[1] += sv;
+		d[2] += std::abs(su);
+		d[3] += std::abs(sv);
+		return;
+	}
+	float *d = out + cell * 8;
+	float *u_half = dv >= 0 ? d : d + 2;
+	float *v_half = du >= 0 ? d + 4 : d + 6;
+	u_half[0] += su;
+	u_half[1] += std::abs(su);
+	v_half[0] += sv;
+	v_half[1] += std::abs(sv);
+}
+
 void describe(const Integral &integral, const SurfKeypoint &kp, bool extended, float *out)
 {
 	const int size = extended ? 128 : 64;
@@ -246,31 +268,7 @@ void describe(const Integral &integral, const SurfKeypoint &kp, bool extended, f
 					if (cx < 0 || cx > 3)
 						continue;
 					const float share = (bu != 0 ? fu : 1 - fu) * (bv != 0 ? fv : 1 - fv);
-					const float su = share * du, sv = share * dv;
-					const int cell = cy * 4 + cx;
-					if (!extended) {
-						float *d = out + cell * 4;
-						d[0] += su;
-						d[1] += sv;
-						d[2] += std::abs(su);
-						d[3] += std::abs(sv);
-					} else {
-						float *d = out + cell * 8;
-						if (dv >= 0) {
-							d[0] += su;
-							d[1] += std::abs(su);
-						} else {
-							d[2] += su;
-							d[3] += std::abs(su);
-						}
-						if (du >= 0) {
-							d[4] += sv;
-							d[5] += std::abs(sv);
-						} else {
-							d[6] += sv;
-							d[7] += std::abs(sv);
-						}
-					}
+					add_to_cell(out, cy * 4 + cx, du, dv, share, extended);
 				}
 			}
 		}

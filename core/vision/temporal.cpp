@@ -9,6 +9,9 @@ TrackSet follow_tracks(const TrackSet *prev, const FollowInput &input, const Cla
 {
 	TrackSet out;
 	out.t_ns = input.t_ns;
+	out.interval_ns = prev != nullptr ? input.t_ns - prev->t_ns : 0;
+	if (input.homography != nullptr)
+		out.homography = *input.homography;
 	out.next_id = prev != nullptr ? prev->next_id : 1;
 	out.by_keypoint.resize(input.cur_keypoints);
 
@@ -19,7 +22,8 @@ TrackSet follow_tracks(const TrackSet *prev, const FollowInput &input, const Cla
 	const double max_motion2 = classifier.dynamic_max_motion_px * classifier.dynamic_max_motion_px;
 	std::vector<bool> prev_taken(prev != nullptr ? prev->by_keypoint.size() : 0, false);
 
-	const bool can_follow = prev != nullptr && input.homography != nullptr && input.cur_image != nullptr;
+	const bool can_follow =
+		prev != nullptr && input.homography != nullptr && input.texture_agrees.size() == input.matches.size();
 	for (size_t i = 0; can_follow && i < input.matches.size() && i < input.pairs.size(); ++i) {
 		const auto p = static_cast<size_t>(input.matches[i].prev);
 		const auto c = static_cast<size_t>(input.matches[i].cur);
@@ -30,8 +34,7 @@ TrackSet follow_tracks(const TrackSet *prev, const FollowInput &input, const Cla
 		const double own2 = static_cast<double>(own.dot(own));
 		if (!std::isfinite(own2) || own2 > max_motion2)
 			continue;
-		if (texture_distance_near(pair.prev_colour, *input.cur_image, pair.cur, classifier) >=
-		    classifier.texture_threshold)
+		if (input.texture_agrees[i] == 0)
 			continue;
 		const TrackState &before = prev->by_keypoint[p];
 		if (before.count > 0) {

@@ -53,12 +53,12 @@ struct TrackSet {
 
 /// What follow_tracks() needs to know about one match: which keypoints it joins, both ends, and the colours.
 struct FollowInput {
-	std::span<const Match> matches;	  ///< frame n-1 keypoint -> frame n keypoint
-	std::span<const PointPair> pairs; ///< the same matches' positions and colours, index for index
-	const cv::Matx33d *homography;	  ///< the static scene's motion n-1 -> n; null: no track is followed
-	const cv::Mat *cur_image;	  ///< frame n, for the texture check of a followed match
-	size_t cur_keypoints = 0;	  ///< keypoints in frame n
-	int64_t t_ns = 0;		  ///< frame n's capture time
+	std::span<const Match> matches;		 ///< frame n-1 keypoint -> frame n keypoint
+	std::span<const PointPair> pairs;	 ///< the same matches' positions and colours, index for index
+	const cv::Matx33d *homography = nullptr; ///< the static scene's motion n-1 -> n; null: no track is followed
+	std::span<const uint8_t> texture_agrees; ///< per match: its two ends look alike (Classification)
+	size_t cur_keypoints = 0;		 ///< keypoints in frame n
+	int64_t t_ns = 0;			 ///< frame n's capture time
 };
 
 /// Frame n's memory from frame n-1's (null: everything starts afresh, as after a gap or on the first frame).

@@ -35,12 +35,17 @@ struct Follower {
 			pairs.push_back(
 				{prev_positions[i], cur_positions[i], cv::Vec3f::all(128), cv::Vec3f::all(128)});
 		}
+		// The texture check, as classify() makes it for every pair against frame n.
+		std::vector<uint8_t> agrees;
+		for (const auto &pair : pairs)
+			agrees.push_back(texture_distance_near(pair.prev_colour, image, pair.cur, classifier) <
+					 classifier.texture_threshold);
 		t_ns += kFrameNs;
 		FollowInput input;
 		input.matches = matches;
 		input.pairs = pairs;
 		input.homography = &still;
-		input.cur_image = &image;
+		input.texture_agrees = agrees;
 		input.cur_keypoints = cur_positions.size();
 		input.t_ns = t_ns;
 		tracks = follow_tracks(started ? &tracks : nullptr, input, classifier, params);
