@@ -171,6 +171,8 @@ std::string status_message(const StatusReport &status)
 		    {"samples", status.capture_to_publish.samples}}}}},
 		{"clients", status.clients},
 	};
+	if (!status.device.empty())
+		message["device"] = status.device;
 	return message.dump();
 }
 
@@ -182,6 +184,11 @@ std::string lag_message(int64_t t_host_ns, uint64_t dropped_total, uint64_t drop
 		    {"dropped", dropped_since_last},
 		    {"dropped_total", dropped_total}}
 		.dump();
+}
+
+std::string error_message(int64_t t_host_ns, const std::string &what)
+{
+	return json{{"v", kVersion}, {"type", "error"}, {"t_host_ns", t_host_ns}, {"error", what}}.dump();
 }
 
 std::string hello_message(int64_t t_host_ns, const std::string &source, int width, int height)

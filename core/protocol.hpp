@@ -37,6 +37,7 @@ struct StatusReport {
 	uint64_t frames_captured = 0;
 	uint64_t frames_published = 0;
 	std::map<std::string, uint64_t> drops; ///< counter name -> frames (or messages) lost there
+	std::map<std::string, int64_t> device; ///< the capture device's own statistics (cameras only)
 	LatencySummary capture_to_publish;
 	size_t clients = 0;
 };
@@ -45,6 +46,9 @@ std::string status_message(const StatusReport &status);
 
 /// Told to one client after its queue overflowed: how many of its messages were discarded.
 std::string lag_message(int64_t t_host_ns, uint64_t dropped_total, uint64_t dropped_since_last);
+
+/// Sent to a client that is refused (client limit, out of descriptors, not allowed) just before it is closed.
+std::string error_message(int64_t t_host_ns, const std::string &what);
 
 /// The first line every client receives.
 std::string hello_message(int64_t t_host_ns, const std::string &source, int width, int height);

@@ -61,6 +61,7 @@ PipelineOptions pipeline_options(const DaemonConfig &config, bool live)
 		config.pipeline.workers > 0 ? static_cast<size_t>(config.pipeline.workers) : default_workers();
 	options.ring_capacity = static_cast<size_t>(config.pipeline.ring_capacity);
 	options.overflow = policy_for(config.pipeline.overflow, live);
+	options.worker_nice = config.pipeline.worker_nice;
 	options.motion = config.motion;
 	return options;
 }
@@ -83,8 +84,13 @@ protocol::StatusReport make_status(const Pipeline &pipeline, const PipelineStats
 			{"source_gap", s.source_gaps},
 			{"corrupt", s.corrupt},
 			{"processing_error", s.processing_errors}};
+	const drivers::SourceCounters source = pipeline.source_counters();
+	for (const auto &[name, count] : source.drops)
+		report.drops[name] = count;
+	report.device = source.device;
 	report.drops["client_queue"] = server.messages_dropped;
 	report.drops["clients_dropped"] = server.clients_dropped;
+	report.drops["clients_refused"] = server.clients_refused;
 	report.clients = server.clients;
 	report.capture_to_publish = s.capture_to_publish;
 	return report;
@@ -167,7 +173,9 @@ int run_daemon(const DaemonConfig &config)
 
 	SocketServer server({config.output.socket, config.output.socket_mode,
 			     static_cast<size_t>(config.output.client_queue),
-			     static_cast<size_t>(config.output.client_max_input)});
+			     static_cast<size_t>(config.output.client_max_input),
+			     static_cast<size_t>(config.output.max_clients),
+			     static_cast<size_t>(config.output.client_queue_bytes)});
 	server.set_greeting(
 		protocol::hello_message(monotonic_ns(), info.name, info.geometry.width, info.geometry.height));
 	const PipelineOptions options = pipeline_options(config, info.live);
@@ -215,11 +223,14 @@ int run_daemon(const DaemonConfig &config)
 			const auto report = emit_status();
 			if (now >= next_log_ns) {
 				next_log_ns = now + 10'000'000'000;
-				spdlog::info("status: {:.1f} fps captured, {:.1f} published, latency p50 {:.1f} ms p99 "
-					     "{:.1f} ms, "
-					     "{} clients",
-					     report.capture_fps, report.publish_fps, report.capture_to_publish.p50_ms,
-					     report.capture_to_publish.p99_ms, report.clients);
+				const SocketServerStats clients = server.stats();
+				spdlog::info("status: {} {:.1f} fps captured, {:.1f} published, latency p50 {:.1f} ms p99 "
+					     "{:.1f} ms, {} clients ({} connected, {} hung up, {} dropped, {} refused "
+					     "since start)",
+					     report.source_state, report.capture_fps, report.publish_fps,
+					     report.capture_to_publish.p50_ms, report.capture_to_publish.p99_ms,
+					     report.clients, clients.accepted, clients.clients_closed,
+					     clients.clients_dropped, clients.clients_refused);
 			}
 		}
 		if (pipeline.finished()) {

@@ -3,14 +3,25 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <functional>
 #include <map>
 #include <sstream>
 
+#include <sys/un.h>
+
 #include <toml.hpp>
 
 namespace stereod::daemon {
+
+std::string describe_cut(const std::string &text, size_t limit)
+{
+	if (text.size() <= limit)
+		return text;
+	return text.substr(0, limit) + "... (" + std::to_string(text.size()) + " bytes)";
+}
+
 namespace {
 
 using Value = toml::value;
@@ -102,6 +113,30 @@ Option text(std::string section, std::string key, std::string help, Access acces
 	return o;
 }
 
+template <typename Access>
+Option text_list(std::string section, std::string key, std::string help, Access access)
+{
+	Option o{std::move(section), std::move(key), std::move(help), nullptr, nullptr};
+	o.set = [access](const Value &v, DaemonConfig &c) {
+		if (!v.is_array())
+			throw std::invalid_argument("must be an array of strings, e.g. [\"Name=value\"]");
+		std::vector<std::string> items;
+		for (const auto &item : v.as_array()) {
+			if (!item.is_string())
+				throw std::invalid_argument("must be an array of strings");
+			items.push_back(item.as_string());
+		}
+		access(c) = std::move(items);
+	};
+	o.show = [access](const DaemonConfig &c) {
+		std::string out = "[";
+		for (const auto &item : access(const_cast<DaemonConfig &>(c)))
+			out += (out.size() > 1 ? ", " : "") + toml::format(Value(item));
+		return out + "]";
+	};
+	return o;
+}
+
 /// ReplayRate is kept as an enum in the source config; the file names it.
 Option replay_rate()
 {
@@ -138,9 +173,9 @@ const std::vector<Option> &options()
 		std::vector<Option> o;
 		// [source]
 		o.push_back(text("source", "driver",
-				 "capture driver: sim | replay | video | kitti | euroc | tum | folder",
+				 "capture driver: sim | aravis | v4l2 | dc1394 | replay | video | kitti | euroc | tum | folder",
 				 [](DaemonConfig &c) -> std::string & { return c.source.driver; },
-				 {"sim", "replay", "video", "kitti", "euroc", "tum", "folder"}));
+				 {"sim", "aravis", "v4l2", "dc1394", "replay", "video", "kitti", "euroc", "tum", "folder"}));
 		o.push_back(text("source", "path", "file or folder for the file drivers",
 				 [](DaemonConfig &c) -> std::string & { return c.source.path; }));
 		o.push_back(replay_rate());
@@ -149,6 +184,106 @@ const std::vector<Option> &options()
 		o.push_back(number(
 			"source", "fps", "frame rate for inputs that state none (folder pairs); 0 = theirs",
 			[](DaemonConfig &c) -> double & { return c.source.fps; }, 0, 1000));
+		// [aravis]
+		o.push_back(text("aravis", "left", "camera id: Vendor-Model-Serial, IP address or user id",
+				 [](DaemonConfig &c) -> std::string & { return c.source.aravis.left; }));
+		o.push_back(text("aravis", "right", "second camera; empty: the left one carries both eyes (layout)",
+				 [](DaemonConfig &c) -> std::string & { return c.source.aravis.right; }));
+		o.push_back(text("aravis", "layout", "pair | interleaved16 | side_by_side | top_bottom",
+				 [](DaemonConfig &c) -> std::string & { return c.source.aravis.layout; },
+				 {"pair", "interleaved16", "side_by_side", "top_bottom"}));
+		o.push_back(number(
+			"aravis", "frame_rate", "AcquisitionFrameRate; 0 = the camera's",
+			[](DaemonConfig &c) -> double & { return c.source.aravis.frame_rate; }, 0, 10000));
+		o.push_back(number(
+			"aravis", "width", "Width; 0 = the camera's", [](DaemonConfig &c) -> int & { return c.source.aravis.width; },
+			0, 65535));
+		o.push_back(number(
+			"aravis", "height", "Height; 0 = the camera's",
+			[](DaemonConfig &c) -> int & { return c.source.aravis.height; }, 0, 65535));
+		o.push_back(text("aravis", "pixel_format", "PixelFormat (Mono8, Mono16, BayerRG8, RGB8, ...); empty = the camera's",
+				 [](DaemonConfig &c) -> std::string & { return c.source.aravis.pixel_format; }));
+		o.push_back(number(
+			"aravis", "exposure_us", "ExposureTime, microseconds; 0 = leave",
+			[](DaemonConfig &c) -> double & { return c.source.aravis.exposure_us; }, 0, 1e8));
+		o.push_back(number(
+			"aravis", "gain_db", "Gain; negative = leave",
+			[](DaemonConfig &c) -> double & { return c.source.aravis.gain_db; }, -1, 1000));
+		o.push_back(number(
+			"aravis", "packet_size", "GigE: GevSCPSPacketSize in bytes; 0 = leave",
+			[](DaemonConfig &c) -> int & { return c.source.aravis.packet_size; }, 0, 65535));
+		o.push_back(text("aravis", "trigger", "off | software (fired at frame_rate) | a TriggerSource (Line0, ...)",
+				 [](DaemonConfig &c) -> std::string & { return c.source.aravis.trigger; }));
+		o.push_back(boolean("aravis", "ptp", "enable IEEE 1588 clock sync on the cameras",
+				    [](DaemonConfig &c) -> bool & { return c.source.aravis.ptp; }));
+		o.push_back(number(
+			"aravis", "max_skew_ms", "pair: frames further apart are unpaired (counted); 0 = a quarter frame period",
+			[](DaemonConfig &c) -> double & { return c.source.aravis.max_skew_ms; }, 0, 10000));
+		o.push_back(text("aravis", "first_byte", "interleaved16: the eye in byte 0 of each pixel (left | right)",
+				 [](DaemonConfig &c) -> std::string & { return c.source.aravis.first_byte; },
+				 {"left", "right"}));
+		o.push_back(text("aravis", "bayer", "auto (from the pixel format) | none | RGGB | GRBG | GBRG | BGGR",
+				 [](DaemonConfig &c) -> std::string & { return c.source.aravis.bayer; },
+				 {"auto", "none", "RGGB", "GRBG", "GBRG", "BGGR"}));
+		o.push_back(text("aravis", "color", "frame images: auto | mono | bgr",
+				 [](DaemonConfig &c) -> std::string & { return c.source.aravis.color; },
+				 {"auto", "mono", "bgr"}));
+		o.push_back(number(
+			"aravis", "buffers", "stream buffers per camera",
+			[](DaemonConfig &c) -> int & { return c.source.aravis.buffers; }, 2, 256));
+		o.push_back(number(
+			"aravis", "no_frame_timeout_s", "a camera silent this long is lost and reconnected",
+			[](DaemonConfig &c) -> double & { return c.source.aravis.no_frame_timeout_s; }, 0.1, 3600));
+		o.push_back(text_list("aravis", "features", "further GenICam settings, [\"Name=value\", ...]",
+				      [](DaemonConfig &c) -> std::vector<std::string> & { return c.source.aravis.features; }));
+		// [v4l2]
+		o.push_back(text("v4l2", "left", "device node", [](DaemonConfig &c) -> std::string & { return c.source.v4l2.left; }));
+		o.push_back(text("v4l2", "right", "second device; empty: the left one carries both eyes (layout)",
+				 [](DaemonConfig &c) -> std::string & { return c.source.v4l2.right; }));
+		o.push_back(text("v4l2", "layout", "pair | side_by_side | top_bottom",
+				 [](DaemonConfig &c) -> std::string & { return c.source.v4l2.layout; },
+				 {"pair", "side_by_side", "top_bottom"}));
+		o.push_back(number(
+			"v4l2", "width", "width; 0 = the driver's", [](DaemonConfig &c) -> int & { return c.source.v4l2.width; },
+			0, 65535));
+		o.push_back(number(
+			"v4l2", "height", "height; 0 = the driver's", [](DaemonConfig &c) -> int & { return c.source.v4l2.height; },
+			0, 65535));
+		o.push_back(text("v4l2", "pixel_format", "YUYV | GREY | MJPG | ...; empty = the driver's",
+				 [](DaemonConfig &c) -> std::string & { return c.source.v4l2.pixel_format; }));
+		o.push_back(number(
+			"v4l2", "fps", "frame rate (VIDIOC_S_PARM); 0 = the driver's",
+			[](DaemonConfig &c) -> double & { return c.source.v4l2.fps; }, 0, 1000));
+		o.push_back(text("v4l2", "color", "frame images: mono | bgr",
+				 [](DaemonConfig &c) -> std::string & { return c.source.v4l2.color; }, {"mono", "bgr"}));
+		o.push_back(number(
+			"v4l2", "buffers", "mmap buffers per device", [](DaemonConfig &c) -> int & { return c.source.v4l2.buffers; },
+			2, 32));
+		o.push_back(number(
+			"v4l2", "max_skew_ms", "pair: frames further apart are unpaired (counted)",
+			[](DaemonConfig &c) -> double & { return c.source.v4l2.max_skew_ms; }, 0, 10000));
+		o.push_back(number(
+			"v4l2", "no_frame_timeout_s", "a device silent this long is lost and reopened",
+			[](DaemonConfig &c) -> double & { return c.source.v4l2.no_frame_timeout_s; }, 0.1, 3600));
+		o.push_back(text_list("v4l2", "controls", "controls by name, [\"name=value\", ...] (v4l2-ctl -l)",
+				      [](DaemonConfig &c) -> std::vector<std::string> & { return c.source.v4l2.controls; }));
+		// [dc1394]
+		o.push_back(text("dc1394", "guid", "camera GUID (hex); empty = the first camera found",
+				 [](DaemonConfig &c) -> std::string & { return c.source.dc1394.guid; }));
+		o.push_back(text("dc1394", "model", "bumblebee2 | xb3",
+				 [](DaemonConfig &c) -> std::string & { return c.source.dc1394.model; }, {"bumblebee2", "xb3"}));
+		o.push_back(text("dc1394", "sensors", "xb3: wide (outer pair) | narrow (left and middle)",
+				 [](DaemonConfig &c) -> std::string & { return c.source.dc1394.sensors; }, {"wide", "narrow"}));
+		o.push_back(text("dc1394", "first_byte", "the eye in byte 0 of each pixel (left | right)",
+				 [](DaemonConfig &c) -> std::string & { return c.source.dc1394.first_byte; }, {"left", "right"}));
+		o.push_back(text("dc1394", "bayer", "auto (the camera's register) | none | RGGB | GRBG | GBRG | BGGR",
+				 [](DaemonConfig &c) -> std::string & { return c.source.dc1394.bayer; },
+				 {"auto", "none", "RGGB", "GRBG", "GBRG", "BGGR"}));
+		o.push_back(text("dc1394", "color", "frame images: auto | mono | bgr",
+				 [](DaemonConfig &c) -> std::string & { return c.source.dc1394.color; }, {"auto", "mono", "bgr"}));
+		o.push_back(number(
+			"dc1394", "frame_rate", "frame rate; 0 = the camera's",
+			[](DaemonConfig &c) -> double & { return c.source.dc1394.frame_rate; }, 0, 240));
 		// [sim]
 		o.push_back(text("sim", "scene",
 				 "default | static_near | static_far | moving_one | moving_many | toward",
@@ -194,6 +329,9 @@ const std::vector<Option> &options()
 		o.push_back(number(
 			"pipeline", "ring_capacity", "frames queued between capture and processing",
 			[](DaemonConfig &c) -> int & { return c.pipeline.ring_capacity; }, 1, 1024));
+		o.push_back(number(
+			"pipeline", "worker_nice", "processing threads run this much nicer than capture (0 = same)",
+			[](DaemonConfig &c) -> int & { return c.pipeline.worker_nice; }, 0, 19));
 		o.push_back(text("pipeline", "overflow", "when processing falls behind: auto | drop-oldest | block",
 				 [](DaemonConfig &c) -> std::string & { return c.pipeline.overflow; },
 				 {"auto", "drop-oldest", "block"}));
@@ -341,7 +479,13 @@ const std::vector<Option> &options()
 		}
 		o.push_back(number(
 			"output", "client_queue", "messages queued per client; a slow client loses its oldest",
-			[](DaemonConfig &c) -> int & { return c.output.client_queue; }, 1, 1000000));
+			[](DaemonConfig &c) -> int & { return c.output.client_queue; }, 1, 100000));
+		o.push_back(number(
+			"output", "client_queue_bytes", "bytes queued per client; a slow client loses its oldest",
+			[](DaemonConfig &c) -> int & { return c.output.client_queue_bytes; }, 4096, 1 << 30));
+		o.push_back(number(
+			"output", "max_clients", "clients served at once; more are refused and counted",
+			[](DaemonConfig &c) -> int & { return c.output.max_clients; }, 1, 100000));
 		o.push_back(number(
 			"output", "client_max_input", "bytes a client may send before it is dropped",
 			[](DaemonConfig &c) -> int & { return c.output.client_max_input; }, 0, 1 << 30));
@@ -394,10 +538,65 @@ void apply_document(const Value &document, const std::string &origin, DaemonConf
 	}
 }
 
+/// A config is a few kilobytes of flat tables. Anything far larger or nested deeper is refused before the
+/// recursive-descent parser sees it: 7,000 nested arrays overflow its stack, a million inline tables burn
+/// tens of seconds of CPU.
+constexpr size_t kMaxConfigBytes = 1 << 20;
+constexpr int kMaxNesting = 32;
+
+/// Checks the nesting of arrays and inline tables, skipping strings and comments. Throws ConfigError naming
+/// the line where the limit is passed.
+void check_nesting(const std::string &text, const std::string &origin)
+{
+	int depth = 0;
+	size_t line = 1;
+	for (size_t i = 0; i < text.size(); ++i) {
+		const char c = text[i];
+		if (c == '\n') {
+			++line;
+		} else if (c == '#') {
+			while (i + 1 < text.size() && text[i + 1] != '\n')
+				++i;
+		} else if (c == '"' || c == '\'') {
+			const bool triple = text.compare(i, 3, std::string(3, c)) == 0;
+			const std::string close = triple ? std::string(3, c) : std::string(1, c);
+			size_t j = i + close.size();
+			while (j < text.size() && text.compare(j, close.size(), close) != 0) {
+				if (c == '"' && text[j] == '\\')
+					++j; // an escaped character cannot close the string
+				else if (text[j] == '\n')
+					++line;
+				++j;
+			}
+			i = std::min(text.size(), j + close.size()) - 1;
+		} else if (c == '[' || c == '{') {
+			if (++depth > kMaxNesting)
+				throw ConfigError(origin + ":" + std::to_string(line) + ": arrays or tables nested deeper than " +
+						  std::to_string(kMaxNesting) + " levels");
+		} else if (c == ']' || c == '}') {
+			depth = std::max(0, depth - 1);
+		}
+	}
+}
+
 Value parse_toml(std::istream &in, const std::string &origin)
 {
+	std::string text;
+	{
+		std::ostringstream buffer;
+		char chunk[65536];
+		while (in.read(chunk, sizeof(chunk)) || in.gcount() > 0) {
+			buffer.write(chunk, in.gcount());
+			if (static_cast<size_t>(buffer.tellp()) > kMaxConfigBytes)
+				throw ConfigError(origin + ": larger than " + std::to_string(kMaxConfigBytes >> 10) +
+						  " KiB; not a stereod config");
+		}
+		text = buffer.str();
+	}
+	check_nesting(text, origin);
+	std::istringstream parsed(text);
 	try {
-		return toml::parse(in, origin);
+		return toml::parse(parsed, origin);
 	} catch (const toml::syntax_error &e) {
 		// toml11's message spans several lines with a source excerpt; keep its first line.
 		std::string what = e.what();
@@ -414,6 +613,14 @@ Value parse_toml(std::istream &in, const std::string &origin)
 
 void load_config_file(const std::string &path, DaemonConfig &config)
 {
+	// A directory reads as a failed stream (std::bad_alloc in toml11), /dev/zero as an endless run of NULs:
+	// only a regular file (or a link to one) is a config.
+	std::error_code ec;
+	const auto status = std::filesystem::status(path, ec);
+	if (ec || !std::filesystem::exists(status))
+		throw ConfigError(path + ": cannot read config file: no such file");
+	if (!std::filesystem::is_regular_file(status))
+		throw ConfigError(path + ": not a regular file; give a TOML config file");
 	std::ifstream in(path, std::ios::binary);
 	if (!in)
 		throw ConfigError(path + ": cannot read config file");
@@ -423,20 +630,29 @@ void load_config_file(const std::string &path, DaemonConfig &config)
 
 void apply_override(const std::string &assignment, DaemonConfig &config)
 {
+	// A newline in a value would start a new TOML line and could set any other key.
+	for (const char c : assignment)
+		if (static_cast<unsigned char>(c) < 0x20 || c == 0x7f)
+			throw ConfigError("--set: control characters are not allowed in an override (" +
+					  describe_cut(assignment) + ")");
 	const auto eq = assignment.find('=');
 	const auto dot = assignment.find('.');
 	if (eq == std::string::npos || dot == std::string::npos || dot > eq)
-		throw ConfigError("--set " + assignment + ": expected section.key=value");
+		throw ConfigError("--set " + describe_cut(assignment) + ": expected section.key=value");
 	const std::string section = assignment.substr(0, dot);
 	const std::string key = assignment.substr(dot + 1, eq - dot - 1);
 	std::string value = assignment.substr(eq + 1);
 	const Option *option = find_option(section, key);
 	if (!option)
-		throw ConfigError("--set " + assignment + ": unknown key '" + section + "." + key + "'");
-	// Bare words are strings: --set source.driver=video works without shell-quoted TOML quotes.
+		throw ConfigError("--set " + describe_cut(assignment) + ": unknown key '" + describe_cut(section + "." + key) +
+				  "'");
+	// Bare words are strings: --set source.driver=video (or aravis.left=127.0.0.1, which is no TOML number)
+	// works without shell-quoted TOML quotes. Anything else is read as TOML.
 	const bool bare_word = !value.empty() && value.find_first_of("\"'[{") == std::string::npos && value != "true" &&
 			       value != "false" && value.find_first_not_of("0123456789+-.eE_") != std::string::npos;
-	if (bare_word)
+	const bool dotted_number = value.find_first_not_of("0123456789.") == std::string::npos &&
+				   std::count(value.begin(), value.end(), '.') > 1;
+	if (bare_word || dotted_number)
 		value = toml::format(Value(value));
 	std::istringstream in("[" + section + "]\n" + key + " = " + value + "\n");
 	apply_document(parse_toml(in, "--set " + section + "." + key), "--set", config);
@@ -445,6 +661,14 @@ void apply_override(const std::string &assignment, DaemonConfig &config)
 
 void validate(const DaemonConfig &config, const std::string &origin)
 {
+	// The socket path is checked here, with the rest of the config, not after the source has started.
+	const std::string &socket = config.output.socket;
+	if (socket.empty())
+		throw ConfigError(origin + ": output.socket: must not be empty");
+	if (socket.size() >= sizeof(sockaddr_un::sun_path))
+		throw ConfigError(origin + ": output.socket: longer than " +
+				  std::to_string(sizeof(sockaddr_un::sun_path) - 1) + " bytes (" + describe_cut(socket) +
+				  ")");
 	const auto &c = config.motion.classifier;
 	if (std::abs(c.alpha + c.beta + c.gamma - 1.0) > 1e-6) {
 		std::ostringstream msg;

@@ -15,6 +15,7 @@ struct PipelineConfig {
 	int workers = 0;	       ///< 0 = one per core
 	int ring_capacity = 8;	       ///< frames between capture and processing
 	std::string overflow = "auto"; ///< auto | drop-oldest | block ("auto": drop-oldest for live sources)
+	int worker_nice = 5;	       ///< processing threads run this much nicer than capture
 };
 
 struct OutputConfig {
@@ -22,6 +23,8 @@ struct OutputConfig {
 	int socket_mode = 0660;
 	int client_queue = 256;	     ///< messages buffered per client before its oldest are dropped
 	int client_max_input = 4096; ///< bytes a client may send before it is dropped as misbehaving
+	int client_queue_bytes = 8 << 20; ///< bytes queued per client before its oldest messages are dropped
+	int max_clients = 64;		  ///< clients served at once; more are refused with an error line
 	double status_interval_s = 1.0;
 };
 
@@ -49,6 +52,8 @@ void load_config_file(const std::string &path, DaemonConfig &config);
 void apply_override(const std::string &assignment, DaemonConfig &config);
 /// Checks the constraints that span several keys (eq. 4: alpha + beta + gamma = 1).
 void validate(const DaemonConfig &config, const std::string &origin);
+/// `text` cut to `limit` characters with its full length said, for echoing user input in messages.
+std::string describe_cut(const std::string &text, size_t limit = 80);
 /// A complete, commented config file holding every option at its default.
 std::string default_config_text();
 

@@ -1,6 +1,8 @@
 #include "daemon/pipeline.hpp"
 
 #include <chrono>
+#include <sys/resource.h>
+#include <unistd.h>
 
 #include <spdlog/spdlog.h>
 
@@ -188,6 +190,11 @@ void Pipeline::dispatch_loop()
 
 void Pipeline::worker_loop()
 {
+	// Workers yield to the capture, dispatch and socket threads: when processing cannot keep up, frames are
+	// dropped in the ring (counted as ring_overflow), not lost inside a starved camera stream. Lowering one's
+	// own priority needs no privilege.
+	if (options_.worker_nice > 0)
+		::setpriority(PRIO_PROCESS, static_cast<id_t>(::gettid()), options_.worker_nice);
 	for (;;) {
 		std::unique_ptr<Job> job;
 		{

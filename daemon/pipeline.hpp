@@ -35,6 +35,7 @@ struct PipelineOptions {
 	size_t workers = 2;
 	size_t ring_capacity = 8;
 	OverflowPolicy overflow = OverflowPolicy::DropOldest;
+	int worker_nice = 5; ///< workers run this much nicer than capture (0 = same priority)
 	vision::MotionParams motion;
 };
 
@@ -74,6 +75,7 @@ public:
 	[[nodiscard]] PipelineStats stats() const;
 	[[nodiscard]] const drivers::SourceInfo &source_info() const { return source_->info(); }
 	[[nodiscard]] std::vector<std::string> source_report() const { return source_->report(); }
+	[[nodiscard]] drivers::SourceCounters source_counters() const { return source_->counters(); }
 
 private:
 	using FeaturesPtr = std::shared_ptr<const vision::FrameFeatures>;

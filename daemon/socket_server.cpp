@@ -86,6 +86,7 @@ SocketServer::SocketServer(SocketServerOptions options) : options_(std::move(opt
 	::epoll_ctl(epoll_fd_, EPOLL_CTL_ADD, listen_fd_, &ev);
 	ev.data.fd = wake_fd_;
 	::epoll_ctl(epoll_fd_, EPOLL_CTL_ADD, wake_fd_, &ev);
+	reserve_fd_ = ::open("/dev/null", O_RDONLY | O_CLOEXEC);
 	thread_ = std::thread([this] { run(); });
 }
 
@@ -96,15 +97,22 @@ SocketServer::~SocketServer()
 	(void)!::write(wake_fd_, &one, sizeof(one));
 	if (thread_.joinable())
 		thread_.join();
-	for (auto &[fd, client] : clients_) {
-		// Best effort: hand each client what is still queued before closing.
-		flush(fd, client);
-		::close(fd);
+	// Best effort: hand each client what is still queued before closing. flush() closes and erases a client
+	// whose send fails, so take each client out of the map before touching it: an iterator into a map that
+	// flush() shrinks is what crashed here under connection churn.
+	while (!clients_.empty()) {
+		const int fd = clients_.begin()->first;
+		if (flush(fd, clients_.begin()->second)) {
+			::close(fd);
+			clients_.erase(fd);
+		}
 	}
 	::close(listen_fd_);
 	::unlink(options_.path.c_str());
 	::close(epoll_fd_);
 	::close(wake_fd_);
+	if (reserve_fd_ >= 0)
+		::close(reserve_fd_);
 }
 
 void SocketServer::set_greeting(std::string line)
@@ -114,6 +122,19 @@ void SocketServer::set_greeting(std::string line)
 	greeting_ = std::make_shared<const std::string>(std::move(line));
 }
 
+void SocketServer::drop_oldest(Client &client)
+{
+	// Drop the oldest message not yet begun: a half-sent line must be finished.
+	const auto victim = client.offset > 0 ? client.queue.begin() + 1 : client.queue.begin();
+	if (victim == client.queue.end())
+		return;
+	client.queued_bytes -= (*victim)->size();
+	client.queue.erase(victim);
+	++client.dropped_total;
+	++client.dropped_unreported;
+	++stats_.messages_dropped;
+}
+
 void SocketServer::publish(std::string line)
 {
 	line.push_back('\n');
@@ -121,17 +142,17 @@ void SocketServer::publish(std::string line)
 	{
 		std::lock_guard lock(mutex_);
 		for (auto &[fd, client] : clients_) {
-			if (client.queue.size() >= options_.client_queue) {
-				// Drop the oldest message not yet begun: a half-sent line must be finished.
-				const auto victim = client.offset > 0 ? client.queue.begin() + 1 : client.queue.begin();
-				if (victim != client.queue.end()) {
-					client.queue.erase(victim);
-					++client.dropped_total;
-					++client.dropped_unreported;
-					++stats_.messages_dropped;
-				}
+			// Bounded by count and by bytes: a client that never reads costs at most client_queue_bytes.
+			while (!client.queue.empty() &&
+			       (client.queue.size() >= options_.client_queue ||
+				client.queued_bytes + message->size() > options_.client_queue_bytes)) {
+				const size_t before = client.queue.size();
+				drop_oldest(client);
+				if (client.queue.size() == before)
+					break; // only the half-sent message is left
 			}
 			client.queue.push_back(message);
+			client.queued_bytes += message->size();
 		}
 	}
 	const uint64_t one = 1;
@@ -206,21 +227,57 @@ void SocketServer::accept_clients()
 {
 	for (;;) {
 		const int fd = ::accept4(listen_fd_, nullptr, nullptr, SOCK_NONBLOCK | SOCK_CLOEXEC);
-		if (fd < 0)
+		if (fd < 0) {
+			if ((errno == EMFILE || errno == ENFILE) && reserve_fd_ >= 0) {
+				// Out of descriptors: the pending connection would keep the listening socket readable and
+				// this thread spinning. Free the reserve, accept it to refuse it, take the reserve back.
+				::close(reserve_fd_);
+				reserve_fd_ = -1;
+				const int refused = ::accept4(listen_fd_, nullptr, nullptr, SOCK_NONBLOCK | SOCK_CLOEXEC);
+				if (refused >= 0)
+					refuse(refused, "the daemon is out of file descriptors");
+				reserve_fd_ = ::open("/dev/null", O_RDONLY | O_CLOEXEC);
+				continue;
+			}
 			return;
+		}
+		if (clients_.size() >= options_.max_clients) {
+			refuse(fd, "too many clients");
+			continue;
+		}
 		Client &client = clients_[fd];
-		if (greeting_)
+		if (greeting_) {
 			client.queue.push_back(greeting_);
+			client.queued_bytes += greeting_->size();
+		}
 		epoll_event ev{};
 		ev.events = EPOLLIN | EPOLLRDHUP;
 		ev.data.fd = fd;
 		::epoll_ctl(epoll_fd_, EPOLL_CTL_ADD, fd, &ev);
 		++stats_.accepted;
-		spdlog::info("socket: client {} connected ({} now)", fd, clients_.size());
+		// Per-client lines at debug only: connection churn must not flood the journal. The status
+		// message and the periodic status log carry the counts.
+		spdlog::debug("socket: client {} connected ({} now)", fd, clients_.size());
 	}
 }
 
-void SocketServer::flush(int fd, Client &client)
+void SocketServer::refuse(int fd, const char *why)
+{
+	const std::string line = protocol::error_message(monotonic_ns(), why) + "\n";
+	(void)!::send(fd, line.data(), line.size(), MSG_DONTWAIT | MSG_NOSIGNAL);
+	::close(fd);
+	++stats_.clients_refused;
+	++refusals_unlogged_;
+	const int64_t now = monotonic_ns();
+	if (now >= next_refusal_log_ns_) { // at most one line every 10 s, however many are refused
+		spdlog::warn("socket: refused {} client(s): {} (limit {} clients)", refusals_unlogged_, why,
+			     options_.max_clients);
+		refusals_unlogged_ = 0;
+		next_refusal_log_ns_ = now + 10'000'000'000;
+	}
+}
+
+bool SocketServer::flush(int fd, Client &client)
 {
 	auto send_some = [&](const std::string &data, size_t &offset) {
 		const ssize_t sent =
@@ -248,6 +305,7 @@ void SocketServer::flush(int fd, Client &client)
 		} else if (!client.queue.empty()) {
 			done = send_some(*client.queue.front(), client.offset);
 			if (done == 1) {
+				client.queued_bytes -= client.queue.front()->size();
 				client.queue.pop_front();
 				client.offset = 0;
 			}
@@ -256,12 +314,13 @@ void SocketServer::flush(int fd, Client &client)
 		}
 		if (done < 0) {
 			close_client(fd, false);
-			return;
+			return false;
 		}
 		if (done == 0)
 			break; // the socket is full: wait for EPOLLOUT
 	}
 	update_interest(fd, client, false);
+	return true;
 }
 
 void SocketServer::update_interest(int fd, Client &client, bool force)
@@ -285,7 +344,10 @@ void SocketServer::close_client(int fd, bool misbehaved)
 		++stats_.clients_dropped;
 	else
 		++stats_.clients_closed;
-	spdlog::info("socket: client {} {} ({} left)", fd, misbehaved ? "dropped" : "disconnected", clients_.size());
+	if (misbehaved)
+		spdlog::warn("socket: client {} dropped ({} left)", fd, clients_.size());
+	else
+		spdlog::debug("socket: client {} disconnected ({} left)", fd, clients_.size());
 }
 
 } // namespace stereod::daemon

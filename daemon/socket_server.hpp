@@ -25,6 +25,8 @@ struct SocketServerOptions {
 	int mode = 0660;
 	size_t client_queue = 256;
 	size_t client_max_input = 4096;
+	size_t max_clients = 64;		     ///< more are refused with an error line and counted
+	size_t client_queue_bytes = 8 * 1024 * 1024; ///< a client's queue is also bounded in bytes
 };
 
 struct SocketServerStats {
@@ -33,6 +35,7 @@ struct SocketServerStats {
 	uint64_t messages_dropped = 0; ///< messages discarded from slow clients' queues
 	uint64_t clients_dropped = 0;  ///< clients disconnected for misbehaving
 	uint64_t clients_closed = 0;   ///< clients that hung up
+	uint64_t clients_refused = 0;  ///< connections refused: client limit reached or out of file descriptors
 };
 
 class SocketServer
@@ -54,7 +57,8 @@ public:
 private:
 	struct Client {
 		std::deque<std::shared_ptr<const std::string>> queue;
-		size_t offset = 0; ///< bytes of queue.front() already sent
+		size_t queued_bytes = 0; ///< sum of the queued messages' sizes
+		size_t offset = 0;	 ///< bytes of queue.front() already sent
 		uint64_t dropped_total = 0;
 		uint64_t dropped_unreported = 0;
 		std::string lag;       ///< a lag notice being sent
@@ -66,7 +70,11 @@ private:
 
 	void run();
 	void accept_clients();
-	void flush(int fd, Client &client); ///< called with mutex_ held
+	/// Accepts one pending connection only to tell it why it is refused, then closes it.
+	void refuse(int fd, const char *why);
+	/// Called with mutex_ held. Returns false when the client was closed (and erased).
+	bool flush(int fd, Client &client);
+	void drop_oldest(Client &client);
 	void close_client(int fd, bool misbehaved);
 	void update_interest(int fd, Client &client, bool force);
 
@@ -74,6 +82,9 @@ private:
 	int listen_fd_ = -1;
 	int epoll_fd_ = -1;
 	int wake_fd_ = -1;
+	int reserve_fd_ = -1; ///< held open so that a refusal can still accept when descriptors run out
+	int64_t next_refusal_log_ns_ = 0;
+	uint64_t refusals_unlogged_ = 0;
 	std::atomic<bool> stop_{false};
 	mutable std::mutex mutex_;
 	std::map<int, Client> clients_;

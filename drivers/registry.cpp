@@ -10,6 +10,9 @@ SourceRegistry SourceRegistry::with_builtin_drivers()
 	register_sim(registry);
 	register_replay(registry);
 	register_datasets(registry);
+	register_aravis(registry);
+	register_v4l2(registry);
+	register_dc1394(registry);
 	return registry;
 }
 

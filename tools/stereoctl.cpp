@@ -6,6 +6,7 @@
 #include <fstream>
 #include <iomanip>
 #include <iostream>
+#include <thread>
 #include <sys/socket.h>
 #include <sys/un.h>
 #include <unistd.h>
@@ -23,6 +24,7 @@
 #include "daemon/socket_server.hpp"
 #include "drivers/replay/recording.hpp"
 #include "tools/common.hpp"
+#include "tools/subcommands.hpp"
 #include "tools/evaluation.hpp"
 
 using namespace stereod;
@@ -141,6 +143,13 @@ int record(const tools::SourceOptions &options, const std::string &output, uint6
 		const auto status = source->grab(frame);
 		if (status == drivers::GrabStatus::EndOfStream)
 			break;
+		if (status == drivers::GrabStatus::Lost) {
+			// A camera went away: keep trying, as the daemon does, until it is back or we are stopped.
+			std::cerr << "stereoctl record: source lost; reconnecting\n";
+			while (!g_interrupted && !source->reconnect())
+				std::this_thread::sleep_for(std::chrono::milliseconds(500));
+			continue;
+		}
 		if (status != drivers::GrabStatus::Frame)
 			continue;
 		writer.append(frame, sync);
@@ -514,7 +523,19 @@ int main(int argc, char **argv)
 	render_cmd->add_option("--frames", render_sheet_frames, "frame numbers for the contact sheet")->delimiter(',');
 	render_cmd->add_flag("--arrows", render_arrows, "draw each point's motion from the previous frame");
 
-	CLI11_PARSE(app, argc, argv);
+	tools::add_devices_command(app);
+	tools::add_export_command(app);
+
+	try {
+		app.parse(argc, argv);
+	} catch (const CLI::RuntimeError &e) {
+		return e.get_exit_code(); // a subcommand that ran in its callback, with its exit status
+	} catch (const CLI::ParseError &e) {
+		return app.exit(e);
+	} catch (const std::exception &e) {
+		std::cerr << "stereoctl: " << e.what() << "\n";
+		return 2;
+	}
 	try {
 		if (*watch_cmd) {
 			std::signal(SIGINT, on_signal);
