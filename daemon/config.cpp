@@ -172,10 +172,11 @@ const std::vector<Option> &options()
 	static const std::vector<Option> all = [] {
 		std::vector<Option> o;
 		// [source]
-		o.push_back(text("source", "driver",
-				 "capture driver: sim | aravis | v4l2 | dc1394 | replay | video | kitti | euroc | tum | folder",
-				 [](DaemonConfig &c) -> std::string & { return c.source.driver; },
-				 {"sim", "aravis", "v4l2", "dc1394", "replay", "video", "kitti", "euroc", "tum", "folder"}));
+		o.push_back(text(
+			"source", "driver",
+			"capture driver: sim | aravis | v4l2 | dc1394 | replay | video | kitti | euroc | tum | folder",
+			[](DaemonConfig &c) -> std::string & { return c.source.driver; },
+			{"sim", "aravis", "v4l2", "dc1394", "replay", "video", "kitti", "euroc", "tum", "folder"}));
 		o.push_back(text("source", "path", "file or folder for the file drivers",
 				 [](DaemonConfig &c) -> std::string & { return c.source.path; }));
 		o.push_back(replay_rate());
@@ -196,12 +197,13 @@ const std::vector<Option> &options()
 			"aravis", "frame_rate", "AcquisitionFrameRate; 0 = the camera's",
 			[](DaemonConfig &c) -> double & { return c.source.aravis.frame_rate; }, 0, 10000));
 		o.push_back(number(
-			"aravis", "width", "Width; 0 = the camera's", [](DaemonConfig &c) -> int & { return c.source.aravis.width; },
-			0, 65535));
+			"aravis", "width", "Width; 0 = the camera's",
+			[](DaemonConfig &c) -> int & { return c.source.aravis.width; }, 0, 65535));
 		o.push_back(number(
 			"aravis", "height", "Height; 0 = the camera's",
 			[](DaemonConfig &c) -> int & { return c.source.aravis.height; }, 0, 65535));
-		o.push_back(text("aravis", "pixel_format", "PixelFormat (Mono8, Mono16, BayerRG8, RGB8, ...); empty = the camera's",
+		o.push_back(text("aravis", "pixel_format",
+				 "PixelFormat (Mono8, Mono16, BayerRG8, RGB8, ...); empty = the camera's",
 				 [](DaemonConfig &c) -> std::string & { return c.source.aravis.pixel_format; }));
 		o.push_back(number(
 			"aravis", "exposure_us", "ExposureTime, microseconds; 0 = leave",
@@ -212,14 +214,22 @@ const std::vector<Option> &options()
 		o.push_back(number(
 			"aravis", "packet_size", "GigE: GevSCPSPacketSize in bytes; 0 = leave",
 			[](DaemonConfig &c) -> int & { return c.source.aravis.packet_size; }, 0, 65535));
-		o.push_back(text("aravis", "trigger", "off | software (fired at frame_rate) | a TriggerSource (Line0, ...)",
+		o.push_back(text("aravis", "trigger",
+				 "off | software (fired at frame_rate) | a TriggerSource (Line0, ...)",
 				 [](DaemonConfig &c) -> std::string & { return c.source.aravis.trigger; }));
 		o.push_back(boolean("aravis", "ptp", "enable IEEE 1588 clock sync on the cameras",
 				    [](DaemonConfig &c) -> bool & { return c.source.aravis.ptp; }));
+		o.push_back(text("aravis", "clock",
+				 "pair: shared (one clock, e.g. PTP: skew from device stamps) | per_camera | auto "
+				 "(shared if ptp)",
+				 [](DaemonConfig &c) -> std::string & { return c.source.aravis.clock; },
+				 {"auto", "shared", "per_camera"}));
 		o.push_back(number(
-			"aravis", "max_skew_ms", "pair: frames further apart are unpaired (counted); 0 = a quarter frame period",
+			"aravis", "max_skew_ms",
+			"pair: frames further apart are unpaired (counted); 0 = a quarter frame period",
 			[](DaemonConfig &c) -> double & { return c.source.aravis.max_skew_ms; }, 0, 10000));
-		o.push_back(text("aravis", "first_byte", "interleaved16: the eye in byte 0 of each pixel (left | right)",
+		o.push_back(text("aravis", "first_byte",
+				 "interleaved16: the eye in byte 0 of each pixel (left | right)",
 				 [](DaemonConfig &c) -> std::string & { return c.source.aravis.first_byte; },
 				 {"left", "right"}));
 		o.push_back(text("aravis", "bayer", "auto (from the pixel format) | none | RGGB | GRBG | GBRG | BGGR",
@@ -234,53 +244,61 @@ const std::vector<Option> &options()
 		o.push_back(number(
 			"aravis", "no_frame_timeout_s", "a camera silent this long is lost and reconnected",
 			[](DaemonConfig &c) -> double & { return c.source.aravis.no_frame_timeout_s; }, 0.1, 3600));
-		o.push_back(text_list("aravis", "features", "further GenICam settings, [\"Name=value\", ...]",
-				      [](DaemonConfig &c) -> std::vector<std::string> & { return c.source.aravis.features; }));
+		o.push_back(text_list(
+			"aravis", "features", "further GenICam settings, [\"Name=value\", ...]",
+			[](DaemonConfig &c) -> std::vector<std::string> & { return c.source.aravis.features; }));
 		// [v4l2]
-		o.push_back(text("v4l2", "left", "device node", [](DaemonConfig &c) -> std::string & { return c.source.v4l2.left; }));
+		o.push_back(text("v4l2", "left", "device node",
+				 [](DaemonConfig &c) -> std::string & { return c.source.v4l2.left; }));
 		o.push_back(text("v4l2", "right", "second device; empty: the left one carries both eyes (layout)",
 				 [](DaemonConfig &c) -> std::string & { return c.source.v4l2.right; }));
 		o.push_back(text("v4l2", "layout", "pair | side_by_side | top_bottom",
 				 [](DaemonConfig &c) -> std::string & { return c.source.v4l2.layout; },
 				 {"pair", "side_by_side", "top_bottom"}));
 		o.push_back(number(
-			"v4l2", "width", "width; 0 = the driver's", [](DaemonConfig &c) -> int & { return c.source.v4l2.width; },
-			0, 65535));
+			"v4l2", "width", "width; 0 = the driver's",
+			[](DaemonConfig &c) -> int & { return c.source.v4l2.width; }, 0, 65535));
 		o.push_back(number(
-			"v4l2", "height", "height; 0 = the driver's", [](DaemonConfig &c) -> int & { return c.source.v4l2.height; },
-			0, 65535));
+			"v4l2", "height", "height; 0 = the driver's",
+			[](DaemonConfig &c) -> int & { return c.source.v4l2.height; }, 0, 65535));
 		o.push_back(text("v4l2", "pixel_format", "YUYV | GREY | MJPG | ...; empty = the driver's",
 				 [](DaemonConfig &c) -> std::string & { return c.source.v4l2.pixel_format; }));
 		o.push_back(number(
 			"v4l2", "fps", "frame rate (VIDIOC_S_PARM); 0 = the driver's",
 			[](DaemonConfig &c) -> double & { return c.source.v4l2.fps; }, 0, 1000));
 		o.push_back(text("v4l2", "color", "frame images: mono | bgr",
-				 [](DaemonConfig &c) -> std::string & { return c.source.v4l2.color; }, {"mono", "bgr"}));
+				 [](DaemonConfig &c) -> std::string & { return c.source.v4l2.color; },
+				 {"mono", "bgr"}));
 		o.push_back(number(
-			"v4l2", "buffers", "mmap buffers per device", [](DaemonConfig &c) -> int & { return c.source.v4l2.buffers; },
-			2, 32));
+			"v4l2", "buffers", "mmap buffers per device",
+			[](DaemonConfig &c) -> int & { return c.source.v4l2.buffers; }, 2, 32));
 		o.push_back(number(
 			"v4l2", "max_skew_ms", "pair: frames further apart are unpaired (counted)",
 			[](DaemonConfig &c) -> double & { return c.source.v4l2.max_skew_ms; }, 0, 10000));
 		o.push_back(number(
 			"v4l2", "no_frame_timeout_s", "a device silent this long is lost and reopened",
 			[](DaemonConfig &c) -> double & { return c.source.v4l2.no_frame_timeout_s; }, 0.1, 3600));
-		o.push_back(text_list("v4l2", "controls", "controls by name, [\"name=value\", ...] (v4l2-ctl -l)",
-				      [](DaemonConfig &c) -> std::vector<std::string> & { return c.source.v4l2.controls; }));
+		o.push_back(text_list(
+			"v4l2", "controls", "controls by name, [\"name=value\", ...] (v4l2-ctl -l)",
+			[](DaemonConfig &c) -> std::vector<std::string> & { return c.source.v4l2.controls; }));
 		// [dc1394]
 		o.push_back(text("dc1394", "guid", "camera GUID (hex); empty = the first camera found",
 				 [](DaemonConfig &c) -> std::string & { return c.source.dc1394.guid; }));
 		o.push_back(text("dc1394", "model", "bumblebee2 | xb3",
-				 [](DaemonConfig &c) -> std::string & { return c.source.dc1394.model; }, {"bumblebee2", "xb3"}));
+				 [](DaemonConfig &c) -> std::string & { return c.source.dc1394.model; },
+				 {"bumblebee2", "xb3"}));
 		o.push_back(text("dc1394", "sensors", "xb3: wide (outer pair) | narrow (left and middle)",
-				 [](DaemonConfig &c) -> std::string & { return c.source.dc1394.sensors; }, {"wide", "narrow"}));
+				 [](DaemonConfig &c) -> std::string & { return c.source.dc1394.sensors; },
+				 {"wide", "narrow"}));
 		o.push_back(text("dc1394", "first_byte", "the eye in byte 0 of each pixel (left | right)",
-				 [](DaemonConfig &c) -> std::string & { return c.source.dc1394.first_byte; }, {"left", "right"}));
+				 [](DaemonConfig &c) -> std::string & { return c.source.dc1394.first_byte; },
+				 {"left", "right"}));
 		o.push_back(text("dc1394", "bayer", "auto (the camera's register) | none | RGGB | GRBG | GBRG | BGGR",
 				 [](DaemonConfig &c) -> std::string & { return c.source.dc1394.bayer; },
 				 {"auto", "none", "RGGB", "GRBG", "GBRG", "BGGR"}));
 		o.push_back(text("dc1394", "color", "frame images: auto | mono | bgr",
-				 [](DaemonConfig &c) -> std::string & { return c.source.dc1394.color; }, {"auto", "mono", "bgr"}));
+				 [](DaemonConfig &c) -> std::string & { return c.source.dc1394.color; },
+				 {"auto", "mono", "bgr"}));
 		o.push_back(number(
 			"dc1394", "frame_rate", "frame rate; 0 = the camera's",
 			[](DaemonConfig &c) -> double & { return c.source.dc1394.frame_rate; }, 0, 240));
@@ -571,7 +589,8 @@ void check_nesting(const std::string &text, const std::string &origin)
 			i = std::min(text.size(), j + close.size()) - 1;
 		} else if (c == '[' || c == '{') {
 			if (++depth > kMaxNesting)
-				throw ConfigError(origin + ":" + std::to_string(line) + ": arrays or tables nested deeper than " +
+				throw ConfigError(origin + ":" + std::to_string(line) +
+						  ": arrays or tables nested deeper than " +
 						  std::to_string(kMaxNesting) + " levels");
 		} else if (c == ']' || c == '}') {
 			depth = std::max(0, depth - 1);
@@ -644,8 +663,8 @@ void apply_override(const std::string &assignment, DaemonConfig &config)
 	std::string value = assignment.substr(eq + 1);
 	const Option *option = find_option(section, key);
 	if (!option)
-		throw ConfigError("--set " + describe_cut(assignment) + ": unknown key '" + describe_cut(section + "." + key) +
-				  "'");
+		throw ConfigError("--set " + describe_cut(assignment) + ": unknown key '" +
+				  describe_cut(section + "." + key) + "'");
 	// Bare words are strings: --set source.driver=video (or aravis.left=127.0.0.1, which is no TOML number)
 	// works without shell-quoted TOML quotes. Anything else is read as TOML.
 	const bool bare_word = !value.empty() && value.find_first_of("\"'[{") == std::string::npos && value != "true" &&
@@ -667,8 +686,8 @@ void validate(const DaemonConfig &config, const std::string &origin)
 		throw ConfigError(origin + ": output.socket: must not be empty");
 	if (socket.size() >= sizeof(sockaddr_un::sun_path))
 		throw ConfigError(origin + ": output.socket: longer than " +
-				  std::to_string(sizeof(sockaddr_un::sun_path) - 1) + " bytes (" + describe_cut(socket) +
-				  ")");
+				  std::to_string(sizeof(sockaddr_un::sun_path) - 1) + " bytes (" +
+				  describe_cut(socket) + ")");
 	const auto &c = config.motion.classifier;
 	if (std::abs(c.alpha + c.beta + c.gamma - 1.0) > 1e-6) {
 		std::ostringstream msg;

@@ -44,24 +44,27 @@ struct SimConfig {
 
 /// GigE Vision / USB3 Vision cameras through Aravis ([aravis] in the config; docs/cameras.md).
 struct AravisConfig {
-	std::string left;		 ///< any id Aravis accepts: "Vendor-Model-Serial", an IP address, a user id
-	std::string right;		 ///< empty: the left camera carries both eyes (see layout)
-	std::string layout = "pair";	 ///< pair | interleaved16 | side_by_side | top_bottom
-	double frame_rate = 30.0;	 ///< AcquisitionFrameRate; 0 = leave the camera's
-	int width = 0;			 ///< 0 = leave the camera's
-	int height = 0;			 ///< 0 = leave the camera's
-	std::string pixel_format;	 ///< GenICam name (Mono8, Mono16, BayerRG8, RGB8, ...); empty = leave
-	double exposure_us = 0;		 ///< 0 = leave (auto exposure stays as configured on the camera)
-	double gain_db = -1;		 ///< < 0 = leave
-	int packet_size = 0;		 ///< GigE only: GevSCPSPacketSize; 0 = leave
-	std::string trigger = "off";	 ///< off | software (the daemon fires at frame_rate) | a TriggerSource name
-	bool ptp = false;		 ///< enable IEEE 1588 on the cameras (GigE, where supported)
-	double max_skew_ms = 0;		 ///< pair: frames further apart are unpaired, counted, never mixed; 0 = a quarter of the frame period
-	std::string first_byte = "right"; ///< interleaved16: which eye byte 0 of each pixel holds (Bumblebee: right)
-	std::string bayer = "auto";	 ///< auto (from the pixel format) | none | RGGB | GRBG | GBRG | BGGR
-	std::string color = "auto";	 ///< frame images: auto (bgr for colour sensors) | mono | bgr
-	int buffers = 16;		 ///< stream buffers per camera, allocated once
-	double no_frame_timeout_s = 3.0; ///< no frame for this long: the camera is treated as lost
+	std::string left;	     ///< any id Aravis accepts: "Vendor-Model-Serial", an IP address, a user id
+	std::string right;	     ///< empty: the left camera carries both eyes (see layout)
+	std::string layout = "pair"; ///< pair | interleaved16 | side_by_side | top_bottom
+	double frame_rate = 30.0;    ///< AcquisitionFrameRate; 0 = leave the camera's
+	int width = 0;		     ///< 0 = leave the camera's
+	int height = 0;		     ///< 0 = leave the camera's
+	std::string pixel_format;    ///< GenICam name (Mono8, Mono16, BayerRG8, RGB8, ...); empty = leave
+	double exposure_us = 0;	     ///< 0 = leave (auto exposure stays as configured on the camera)
+	double gain_db = -1;	     ///< < 0 = leave
+	int packet_size = 0;	     ///< GigE only: GevSCPSPacketSize; 0 = leave
+	std::string trigger = "off"; ///< off | software (the daemon fires at frame_rate) | a TriggerSource name
+	bool ptp = false;	     ///< enable IEEE 1588 on the cameras (GigE, where supported)
+	std::string clock =
+		"auto"; ///< auto | shared (the cameras' clocks are one: PTP) | per_camera; auto = shared with ptp
+	double max_skew_ms =
+		0; ///< pair: frames further apart are unpaired, counted, never mixed; 0 = a quarter of the frame period
+	std::string first_byte = "right";  ///< interleaved16: which eye byte 0 of each pixel holds (Bumblebee: right)
+	std::string bayer = "auto";	   ///< auto (from the pixel format) | none | RGGB | GRBG | GBRG | BGGR
+	std::string color = "auto";	   ///< frame images: auto (bgr for colour sensors) | mono | bgr
+	int buffers = 16;		   ///< stream buffers per camera, allocated once
+	double no_frame_timeout_s = 3.0;   ///< no frame for this long: the camera is treated as lost
 	std::vector<std::string> features; ///< further GenICam settings, "Name=value", applied last
 };
 
@@ -72,11 +75,11 @@ struct V4l2Config {
 	std::string layout = "side_by_side"; ///< pair | side_by_side | top_bottom
 	int width = 0;			     ///< 0 = leave the driver's
 	int height = 0;
-	std::string pixel_format; ///< YUYV | GREY | MJPG | ...; empty = leave the driver's
-	double fps = 0;		  ///< VIDIOC_S_PARM; 0 = leave
+	std::string pixel_format;   ///< YUYV | GREY | MJPG | ...; empty = leave the driver's
+	double fps = 0;		    ///< VIDIOC_S_PARM; 0 = leave
 	std::string color = "mono"; ///< frame images: mono | bgr
-	int buffers = 4;		  ///< mmap buffers per device
-	double max_skew_ms = 10.0;	  ///< pair: frames further apart are unpaired
+	int buffers = 4;	    ///< mmap buffers per device
+	double max_skew_ms = 10.0;  ///< pair: frames further apart are unpaired
 	double no_frame_timeout_s = 3.0;
 	std::vector<std::string> controls; ///< "name=value" by the control's name (v4l2-ctl -l), e.g. "exposure_auto=1"
 };

@@ -23,7 +23,8 @@ bool DeviceClock::add(int64_t device_ns, int64_t host_ns, int64_t jump_ns)
 	if (count_ > 0) {
 		const Sample &last = samples_[(next_ + kWindow - 1) % kWindow];
 		const int64_t predicted = to_host(device_ns);
-		if (device_ns <= last.device_ns || std::llabs(host_ns - predicted) > jump_ns) {
+		// Small steps back are two cameras on one clock interleaving; a large one is a reset.
+		if (device_ns + jump_ns < last.device_ns || std::llabs(host_ns - predicted) > jump_ns) {
 			reset();
 			++restarts_;
 			continues = false;
@@ -86,9 +87,15 @@ void DeviceClock::refit() noexcept
 		if (sdd > 0)
 			rate_ = sdh / sdd;
 	}
+	// Offset: the fastest delivery of the recent window and of every remembered second. Minutes of minima
+	// give a floor that stays put; a window of seconds alone lets the floor jump whenever its fastest
+	// sample slides out, and two cameras' floors would then jump apart.
 	double lowest = std::numeric_limits<double>::infinity();
 	for (size_t i = 0; i < count_; ++i)
 		lowest = std::min(lowest, residual(samples_[i]));
+	if (bucket_count_ >= kMinBuckets)
+		for (size_t i = 0; i < bucket_count_; ++i)
+			lowest = std::min(lowest, residual(buckets_[i]));
 	offset_ = lowest;
 }
 
@@ -126,6 +133,29 @@ uint64_t FrameIdCounter::add(uint64_t id) noexcept
 	last_ = id;
 	missing_ += gap;
 	return gap;
+}
+
+} // namespace stereod::camera
+
+namespace stereod::camera {
+
+void CadenceTracker::add(int64_t device_ns) noexcept
+{
+	if (period_ <= 0 || device_ns == 0)
+		return;
+	if (last_ == 0 || device_ns <= last_) {
+		last_ = device_ns;
+		return;
+	}
+	// Compared with the previous frame, not with a grid: a grid anchored on a late frame would call every
+	// later frame late.
+	const double periods = static_cast<double>(device_ns - last_) / static_cast<double>(period_);
+	const double slots = std::round(periods);
+	if (slots > 1)
+		skipped_ += static_cast<uint64_t>(slots) - 1;
+	if (std::abs(periods - slots) * static_cast<double>(period_) > static_cast<double>(tolerance_) || slots < 1)
+		++irregular_;
+	last_ = device_ns;
 }
 
 } // namespace stereod::camera

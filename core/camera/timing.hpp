@@ -17,7 +17,8 @@ namespace stereod::camera {
 ///    kBuckets seconds. A per-second minimum is steady to microseconds where single samples jump by
 ///    milliseconds, and minutes of baseline make the slope exact to a few ppm. Until kMinBuckets seconds are
 ///    in, the rate is taken as 1 (drift under 100 ppm costs under 1 us per 10 ms of offset age);
-///  - offset: the smallest residual among the last kWindow samples.
+///  - offset: the smallest residual among the last kWindow samples and (once the rate is fitted) the
+///    per-second minima, so the floor does not jump when one fast sample leaves the window.
 /// The mapped time is therefore "device time on the host clock, plus the minimum transfer delay". Two
 /// cameras on the same link get the same floor, so their mapped times are directly comparable.
 /// A device clock that jumps (camera reset, a clock restarting at zero) restarts the fit.
@@ -30,7 +31,8 @@ public:
 	static constexpr int64_t kBucketNs = 1'000'000'000;
 
 	/// Adds a sample; returns false (and restarts the fit from this sample) when it does not continue the
-	/// previous ones (device time went backwards, or device and host disagree by more than `jump_ns`).
+	/// previous ones (device time went back, or device and host disagree, by more than `jump_ns`). Samples
+	/// of several cameras on one clock (PTP) may be mixed.
 	bool add(int64_t device_ns, int64_t host_ns, int64_t jump_ns = 1'000'000'000);
 	/// The host CLOCK_MONOTONIC time of `device_ns`. Needs at least one sample.
 	[[nodiscard]] int64_t to_host(int64_t device_ns) const noexcept;
@@ -49,16 +51,17 @@ private:
 	void refit() noexcept;
 	[[nodiscard]] double residual(const Sample &s) const noexcept
 	{
-		return static_cast<double>(s.host_ns - origin_host_) - rate_ * static_cast<double>(s.device_ns - origin_device_);
+		return static_cast<double>(s.host_ns - origin_host_) -
+		       rate_ * static_cast<double>(s.device_ns - origin_device_);
 	}
 
 	std::array<Sample, kWindow> samples_{};
-	size_t next_ = 0;  ///< where the next sample goes
-	size_t count_ = 0; ///< valid samples, at most kWindow
+	size_t next_ = 0;			 ///< where the next sample goes
+	size_t count_ = 0;			 ///< valid samples, at most kWindow
 	std::array<Sample, kBuckets> buckets_{}; ///< the fastest delivery of each finished second
 	size_t bucket_next_ = 0;
 	size_t bucket_count_ = 0;
-	Sample current_{};	     ///< the fastest delivery so far in the second being filled
+	Sample current_{};	    ///< the fastest delivery so far in the second being filled
 	int64_t current_start_ = 0; ///< device time where that second began
 	bool current_valid_ = false;
 	// The fit: host = origin_host_ + offset_ + rate_ * (device - origin_device_), in doubles relative to an
@@ -126,6 +129,32 @@ private:
 	bool started_ = false;
 	int64_t last_ = 0;
 	int64_t base_ = 0;
+};
+
+/// Follows a free-running camera's frame cadence. Consecutive frames are a whole number of frame periods
+/// apart; a camera that stalls (a busy sender, a bus hiccup) skips periods without a frame-id gap, or sends
+/// a frame off its cadence. A partner camera's frames of those moments can have no pair, so both are
+/// counted: every unpaired frame can then be traced to the camera that caused it.
+class CadenceTracker
+{
+public:
+	/// `period_ns`: the nominal frame period (0 = not free-running: nothing is tracked). `tolerance_ns`: how
+	/// far from a whole number of periods an interval may be and still be regular.
+	CadenceTracker(int64_t period_ns, int64_t tolerance_ns) noexcept : period_(period_ns), tolerance_(tolerance_ns)
+	{
+	}
+	void add(int64_t device_ns) noexcept;
+	void reset() noexcept { last_ = 0; }
+	[[nodiscard]] uint64_t skipped_periods() const noexcept { return skipped_; }
+	/// Intervals off a whole number of periods by more than the tolerance (a late frame makes up to two).
+	[[nodiscard]] uint64_t irregular_intervals() const noexcept { return irregular_; }
+
+private:
+	int64_t period_;
+	int64_t tolerance_;
+	int64_t last_ = 0;
+	uint64_t skipped_ = 0;
+	uint64_t irregular_ = 0;
 };
 
 enum class PairAction : uint8_t {

@@ -46,7 +46,8 @@ std::string join(const char **items, guint n)
 	return out;
 }
 
-template <typename T> std::string range_text(T lo, T hi)
+template <typename T>
+std::string range_text(T lo, T hi)
 {
 	std::ostringstream out;
 	out << lo << ".." << hi;
@@ -241,6 +242,7 @@ void AravisCamera::configure(const AravisConfig &config)
 	error.check(where + ": creating the stream");
 	const guint payload = arv_camera_get_payload(camera_, &error);
 	error.check(where + ": reading the payload size");
+	payload_ = payload;
 	const int buffers = std::max(2, config.buffers);
 	for (int i = 0; i < buffers; ++i)
 		arv_stream_push_buffer(stream_, arv_buffer_new(payload, nullptr));
@@ -263,7 +265,8 @@ bool AravisCamera::next(uint64_t timeout_us, BufferView &view)
 			return false;
 		const ArvBufferStatus status = arv_buffer_get_status(buffer);
 		if (status != ARV_BUFFER_STATUS_SUCCESS && status != ARV_BUFFER_STATUS_MISSING_PACKETS) {
-			spdlog::trace("aravis: {}: buffer {} status {}", role_, arv_buffer_get_frame_id(buffer), static_cast<int>(status));
+			spdlog::trace("aravis: {}: buffer {} status {}", role_, arv_buffer_get_frame_id(buffer),
+				      static_cast<int>(status));
 			++failed_;
 			arv_stream_push_buffer(stream_, buffer);
 			continue;
@@ -283,6 +286,15 @@ bool AravisCamera::next(uint64_t timeout_us, BufferView &view)
 		const int64_t now_mono = monotonic_ns();
 		view.arrival_ns = system_ns > 0 ? now_mono - std::max<int64_t>(0, realtime_ns() - system_ns) : now_mono;
 		view.complete = status == ARV_BUFFER_STATUS_SUCCESS;
+		if (!view.complete && view.width == 0) {
+			// A buffer with missing packets may carry no image description (its leader was lost); its data
+			// is still the full payload at the geometry the stream was opened with.
+			view.width = width_;
+			view.height = height_;
+			view.pixel_format = pixel_format_;
+		}
+		if (!view.complete)
+			view.size = std::max(view.size, payload_); // the buffer holds the whole payload, holes and all
 		return true;
 	}
 }

@@ -25,9 +25,9 @@ struct BufferView {
 	int height = 0;
 	uint32_t pixel_format = 0; ///< PFNC code
 	uint64_t frame_id = 0;
-	int64_t device_ns = 0;	  ///< the camera's timestamp; 0 when it has no clock
-	int64_t arrival_ns = 0;	  ///< CLOCK_MONOTONIC when the buffer was complete on the host
-	bool complete = true;	  ///< false: packets are missing, the rest of the image is valid
+	int64_t device_ns = 0;	///< the camera's timestamp; 0 when it has no clock
+	int64_t arrival_ns = 0; ///< CLOCK_MONOTONIC when the buffer was complete on the host
+	bool complete = true;	///< false: packets are missing, the rest of the image is valid
 };
 
 /// Cumulative stream statistics of one camera (kept across reconnects by the source).
@@ -83,6 +83,7 @@ private:
 	int width_ = 0;
 	int height_ = 0;
 	uint32_t pixel_format_ = 0;
+	size_t payload_ = 0; ///< bytes of every stream buffer
 	std::string pixel_format_name_;
 	std::string description_;
 	bool gige_ = false;

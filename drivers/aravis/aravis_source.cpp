@@ -50,8 +50,8 @@ PixelRecipe recipe_for(const AravisConfig &config, uint32_t format, const std::s
 				  format_name);
 	if ((recipe.layout == camera::StereoLayout::SideBySide || recipe.layout == camera::StereoLayout::TopBottom) &&
 	    recipe.bytes_per_pixel != 1)
-		throw SourceError("aravis.layout = \"" + config.layout + "\" needs an 8-bit pixel format; the camera sends " +
-				  format_name);
+		throw SourceError("aravis.layout = \"" + config.layout +
+				  "\" needs an 8-bit pixel format; the camera sends " + format_name);
 	if (config.bayer == "auto") {
 		switch (format) {
 		case ARV_PIXEL_FORMAT_BAYER_RG_8:
@@ -84,14 +84,13 @@ struct CameraState {
 	std::unique_ptr<AravisCamera> camera;
 	camera::DeviceClock clock;
 	camera::FrameIdCounter ids{16};
-	BufferView pending;    ///< popped and not yet paired
+	BufferView pending;	  ///< popped and not yet paired
 	int64_t pending_host = 0; ///< its timestamp on the host clock
 	bool has_pending = false;
 	int64_t last_frame_ns = 0; ///< host time of the last buffer of any kind
-	int64_t last_device_ns = 0; ///< device timestamp of the last frame on the camera's cadence
-	std::atomic<uint64_t> skipped_periods{0}; ///< frame periods in which the camera sent nothing (its ids go on)
-	std::atomic<uint64_t> late_frames{0};	  ///< frames off the camera's cadence by more than a quarter period
-	StreamStatistics before;   ///< totals of the streams closed by reconnects
+	camera::CadenceTracker cadence{0, 0};
+	std::atomic<uint64_t> skipped_periods{0}, irregular{0}; ///< the cadence's counts, for status
+	StreamStatistics before;				///< totals of the streams closed by reconnects
 	uint64_t failed_before = 0;
 	std::atomic<uint64_t> completed{0}, failures{0}, underruns{0}, resent{0}, missing_packets{0}, failed{0},
 		missing_frames{0}, incomplete{0}, clock_restarts{0};
@@ -107,16 +106,26 @@ public:
 			throw SourceError("aravis.left: no camera given; " + aravis::found_cameras_text());
 		paired_ = !config_.right.empty();
 		if (paired_ && config_.layout != "pair")
-			throw SourceError("aravis.right is set, so aravis.layout must be \"pair\" (got \"" + config_.layout +
-					  "\")");
+			throw SourceError("aravis.right is set, so aravis.layout must be \"pair\" (got \"" +
+					  config_.layout + "\")");
 		if (!paired_ && config_.layout == "pair")
-			throw SourceError("aravis.layout = \"pair\" needs aravis.right; for one camera carrying both eyes "
-					  "choose interleaved16, side_by_side or top_bottom");
+			throw SourceError(
+				"aravis.layout = \"pair\" needs aravis.right; for one camera carrying both eyes "
+				"choose interleaved16, side_by_side or top_bottom");
 		// Default: a quarter period. Two frames further apart than that are not the same moment, and a frame
 		// stamped late (a stalled camera) must not steal the partner of the next one, which is on time.
 		const double rate = config_.frame_rate > 0 ? config_.frame_rate : 30.0;
-		max_skew_ns_ = static_cast<int64_t>(config_.max_skew_ms > 0 ? config_.max_skew_ms * 1e6 : 0.25e9 / rate);
-		period_ns_ = config_.frame_rate > 0 && config_.trigger == "off" ? static_cast<int64_t>(1e9 / config_.frame_rate) : 0;
+		max_skew_ns_ =
+			static_cast<int64_t>(config_.max_skew_ms > 0 ? config_.max_skew_ms * 1e6 : 0.25e9 / rate);
+		if (config_.clock != "auto" && config_.clock != "shared" && config_.clock != "per_camera")
+			throw SourceError("aravis.clock = \"" + config_.clock +
+					  "\": must be auto, shared or per_camera");
+		shared_clock_ = config_.clock == "shared" || (config_.clock == "auto" && config_.ptp);
+		const int64_t period = config_.frame_rate > 0 && config_.trigger == "off"
+					       ? static_cast<int64_t>(1e9 / config_.frame_rate)
+					       : 0;
+		for (auto &state : cams_)
+			state.cadence = camera::CadenceTracker(period, max_skew_ns_);
 		no_frame_ns_ = static_cast<int64_t>(config_.no_frame_timeout_s * 1e9);
 		open(kLeft);
 		if (paired_)
@@ -127,11 +136,11 @@ public:
 			const AravisCamera &right = *cams_[kRight].camera;
 			if (right.width() != left.width() || right.height() != left.height() ||
 			    right.pixel_format() != left.pixel_format())
-				throw SourceError("aravis: the two cameras differ: left " + std::to_string(left.width()) + "x" +
-						  std::to_string(left.height()) + " " + left.pixel_format_name() +
-						  ", right " + std::to_string(right.width()) + "x" +
-						  std::to_string(right.height()) + " " + right.pixel_format_name() +
-						  "; set aravis.width, height and pixel_format");
+				throw SourceError(
+					"aravis: the two cameras differ: left " + std::to_string(left.width()) + "x" +
+					std::to_string(left.height()) + " " + left.pixel_format_name() + ", right " +
+					std::to_string(right.width()) + "x" + std::to_string(right.height()) + " " +
+					right.pixel_format_name() + "; set aravis.width, height and pixel_format");
 		}
 		width_ = left.width();
 		height_ = left.height();
@@ -166,7 +175,8 @@ public:
 			const int64_t now = monotonic_ns();
 			if (now >= deadline)
 				return GrabStatus::Timeout;
-			const uint64_t wait_us = static_cast<uint64_t>(std::min<int64_t>(deadline - now, 20'000'000) / 1000);
+			const uint64_t wait_us =
+				static_cast<uint64_t>(std::min<int64_t>(deadline - now, 20'000'000) / 1000);
 			CameraState &left = cams_[kLeft];
 			if (!left.has_pending && !take(left, wait_us))
 				continue;
@@ -179,14 +189,16 @@ public:
 			case camera::PairAction::Pair:
 				return emit(into, left, &right);
 			case camera::PairAction::DropLeft:
-				spdlog::debug("aravis: left frame {} unpaired: right {} is {} ns later", left.pending.frame_id,
-					      right.pending.frame_id, right.pending_host - left.pending_host);
+				spdlog::debug("aravis: left frame {} unpaired: right {} is {} ns later",
+					      left.pending.frame_id, right.pending.frame_id,
+					      right.pending_host - left.pending_host);
 				release_pending(left);
 				count_unpaired();
 				break;
 			case camera::PairAction::DropRight:
-				spdlog::debug("aravis: right frame {} unpaired: left {} is {} ns later", right.pending.frame_id,
-					      left.pending.frame_id, left.pending_host - right.pending_host);
+				spdlog::debug("aravis: right frame {} unpaired: left {} is {} ns later",
+					      right.pending.frame_id, left.pending.frame_id,
+					      left.pending_host - right.pending_host);
 				release_pending(right);
 				count_unpaired();
 				break;
@@ -218,8 +230,9 @@ public:
 			const AravisCamera &fresh = *state.camera;
 			if (fresh.width() != width_ || fresh.height() != height_ ||
 			    fresh.pixel_format() != cams_[kLeft].camera->pixel_format()) {
-				spdlog::warn("aravis: {} came back as {}x{} {}, not {}x{}; retrying", fresh.description(),
-					     fresh.width(), fresh.height(), fresh.pixel_format_name(), width_, height_);
+				spdlog::warn("aravis: {} came back as {}x{} {}, not {}x{}; retrying",
+					     fresh.description(), fresh.width(), fresh.height(),
+					     fresh.pixel_format_name(), width_, height_);
 				retire(state);
 				return false;
 			}
@@ -257,7 +270,7 @@ public:
 			out.device[prefix + "clock_restarts"] = static_cast<int64_t>(s.clock_restarts.load());
 			out.device[prefix + "drift_ppb"] = s.drift_ppb.load();
 			out.device[prefix + "skipped_periods"] = static_cast<int64_t>(s.skipped_periods.load());
-			out.device[prefix + "late_frames"] = static_cast<int64_t>(s.late_frames.load());
+			out.device[prefix + "irregular_intervals"] = static_cast<int64_t>(s.irregular.load());
 		}
 		// Frames lost on the wire by the right camera show up as unpaired left frames; the left camera's
 		// own losses are the pipeline's source_gap (the frame sequence follows its ids).
@@ -277,7 +290,7 @@ private:
 							      side == kLeft ? "left" : "right");
 		state.clock.reset();
 		state.ids.reset();
-		state.last_device_ns = 0;
+		state.cadence.reset();
 		state.last_frame_ns = monotonic_ns();
 	}
 
@@ -309,9 +322,10 @@ private:
 				if ((side == kLeft || paired_) && failed(cams_[side]))
 					spdlog::warn("aravis: {} camera {}: {}", side == kLeft ? "left" : "right",
 						     side == kLeft ? config_.left : config_.right,
-						     !cams_[side].camera		 ? "not open"
-						     : cams_[side].camera->control_lost() ? "control lost"
-											   : "no frame within no_frame_timeout_s");
+						     !cams_[side].camera ? "not open"
+						     : cams_[side].camera->control_lost()
+							     ? "control lost"
+							     : "no frame within no_frame_timeout_s");
 			return true;
 		}
 		return false;
@@ -333,34 +347,7 @@ private:
 	/// Until the first pair after opening (or reconnecting), the cameras are still starting one after the
 	/// other: frames of the first one have no partner yet. Those are counted apart, not as stream losses
 	/// (an outage's own cost is counted by reconnect()).
-	void count_unpaired()
-	{
-		(paired_once_ ? unpaired_ : startup_unpaired_).fetch_add(1);
-	}
-
-	/// A free-running camera's frames sit on a grid of its frame period. One that stalls (a busy sender, a
-	/// bus hiccup) skips periods without a frame-id gap, or sends a frame off the grid (by more than the pairing tolerance); the partner's frames
-	/// of those moments can have no pair. Both are counted, so every unpaired frame can be traced to the
-	/// camera that caused it.
-	void track_cadence(CameraState &state, int64_t device_ns)
-	{
-		if (period_ns_ == 0 || device_ns == 0)
-			return;
-		if (state.last_device_ns == 0 || device_ns <= state.last_device_ns) {
-			state.last_device_ns = device_ns;
-			return;
-		}
-		const double periods = static_cast<double>(device_ns - state.last_device_ns) / static_cast<double>(period_ns_);
-		const double k = std::max(1.0, std::round(periods));
-		state.skipped_periods.fetch_add(static_cast<uint64_t>(k) - 1);
-		if (std::abs(periods - k) * static_cast<double>(period_ns_) > static_cast<double>(max_skew_ns_)) {
-			// Off the grid: a late frame of slot k. The grid moves on by k periods, not to this frame.
-			state.late_frames.fetch_add(1);
-			state.last_device_ns += static_cast<int64_t>(k) * period_ns_;
-		} else {
-			state.last_device_ns = device_ns; // on the grid: follow the camera's own clock
-		}
-	}
+	void count_unpaired() { (paired_once_ ? unpaired_ : startup_unpaired_).fetch_add(1); }
 
 	/// Pops the next buffer of one camera into its pending slot.
 	bool take(CameraState &state, uint64_t timeout_us)
@@ -373,13 +360,17 @@ private:
 		state.missing_frames.fetch_add(state.ids.add(view.frame_id));
 		if (!view.complete)
 			state.incomplete.fetch_add(1);
-		track_cadence(state, view.device_ns);
+		state.cadence.add(view.device_ns);
+		state.skipped_periods.store(state.cadence.skipped_periods());
+		state.irregular.store(state.cadence.irregular_intervals());
 		// Device clock onto CLOCK_MONOTONIC; a device without a clock (timestamp 0) gets its arrival time.
+		// Cameras on one clock (PTP) share one fit, so their skew is exactly that of their own stamps.
 		if (view.device_ns != 0) {
-			if (!state.clock.add(view.device_ns, view.arrival_ns))
+			camera::DeviceClock &clock = shared_clock_ ? cams_[kLeft].clock : state.clock;
+			if (!clock.add(view.device_ns, view.arrival_ns))
 				state.clock_restarts.fetch_add(1);
-			state.pending_host = state.clock.to_host(view.device_ns);
-			state.drift_ppb.store(static_cast<int64_t>(std::llround(state.clock.drift() * 1e9)));
+			state.pending_host = clock.to_host(view.device_ns);
+			state.drift_ppb.store(static_cast<int64_t>(std::llround(clock.drift() * 1e9)));
 		} else {
 			state.pending_host = view.arrival_ns;
 		}
@@ -424,7 +415,7 @@ private:
 				fill_eyes(recipe_, r.data, r.size, r.width, r.height, scratch_, into.right, nullptr);
 			}
 			into.status = l.complete && (!right || right->pending.complete) ? FrameStatus::Ok
-										: FrameStatus::Incomplete;
+											: FrameStatus::Incomplete;
 		} catch (const std::exception &e) {
 			// A short or resized buffer: its pixels cannot be trusted, the frame still counts.
 			spdlog::warn("aravis: frame {}: {}", l.frame_id, e.what());
@@ -449,8 +440,8 @@ private:
 
 	AravisConfig config_;
 	bool paired_ = false;
+	bool shared_clock_ = false; ///< both cameras' timestamps are on one clock (PTP): one fit for both
 	int64_t max_skew_ns_ = 0;
-	int64_t period_ns_ = 0; ///< nominal frame period of free-running cameras, 0 when triggered
 	int64_t no_frame_ns_ = 0;
 	int64_t trigger_period_ns_ = 0;
 	int64_t next_trigger_ns_ = 0;

@@ -6,7 +6,7 @@ WORK=$(mktemp -d /tmp/stereod-it.XXXXXX)
 PIDS=()
 cleanup() {
 	for pid in "${PIDS[@]}"; do kill -9 "$pid" 2>/dev/null || true; done
-	rm -rf "$WORK"
+	[ -n "${STEREOD_KEEP_WORK:-}" ] && echo "kept $WORK" || rm -rf "$WORK"
 }
 trap cleanup EXIT
 fail() { echo "FAIL: $*" >&2; exit 1; }
