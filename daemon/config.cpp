@@ -654,6 +654,9 @@ void apply_override(const std::string &assignment, DaemonConfig &config)
 		if (static_cast<unsigned char>(c) < 0x20 || c == 0x7f)
 			throw ConfigError("--set: control characters are not allowed in an override (" +
 					  describe_cut(assignment) + ")");
+	if (assignment.size() > kMaxConfigBytes)
+		throw ConfigError("--set " + describe_cut(assignment) + ": larger than " +
+				  std::to_string(kMaxConfigBytes >> 10) + " KiB");
 	const auto eq = assignment.find('=');
 	const auto dot = assignment.find('.');
 	if (eq == std::string::npos || dot == std::string::npos || dot > eq)

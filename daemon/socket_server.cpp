@@ -171,12 +171,22 @@ void SocketServer::run()
 {
 	std::array<epoll_event, 32> events{};
 	while (!stop_.load()) {
-		const int n = ::epoll_wait(epoll_fd_, events.data(), static_cast<int>(events.size()), 500);
+		const int n = ::epoll_wait(epoll_fd_, events.data(), static_cast<int>(events.size()),
+					   listen_paused_until_ns_ != 0 ? 50 : 500);
 		if (n < 0 && errno != EINTR) {
 			spdlog::error("socket server: epoll_wait: {}", std::strerror(errno));
 			break;
 		}
 		std::lock_guard lock(mutex_);
+		if (listen_paused_until_ns_ != 0 && monotonic_ns() >= listen_paused_until_ns_) {
+			listen_paused_until_ns_ = 0;
+			epoll_event ev{};
+			ev.events = EPOLLIN;
+			ev.data.fd = listen_fd_;
+			::epoll_ctl(epoll_fd_, EPOLL_CTL_ADD, listen_fd_, &ev);
+			if (reserve_fd_ < 0)
+				reserve_fd_ = ::open("/dev/null", O_RDONLY | O_CLOEXEC);
+		}
 		for (int i = 0; i < n; ++i) {
 			const int fd = events[static_cast<size_t>(i)].data.fd;
 			const uint32_t what = events[static_cast<size_t>(i)].events;
@@ -228,18 +238,27 @@ void SocketServer::accept_clients()
 	for (;;) {
 		const int fd = ::accept4(listen_fd_, nullptr, nullptr, SOCK_NONBLOCK | SOCK_CLOEXEC);
 		if (fd < 0) {
-			if ((errno == EMFILE || errno == ENFILE) && reserve_fd_ >= 0) {
-				// Out of descriptors: the pending connection would keep the listening socket readable and
-				// this thread spinning. Free the reserve, accept it to refuse it, take the reserve back.
+			if (errno != EMFILE && errno != ENFILE)
+				return; // EAGAIN: nothing more pending
+			// Out of descriptors (accept fails so even with nothing pending). A pending connection would keep
+			// the listening socket readable and this thread spinning: free the reserve, accept it to refuse
+			// it, take the reserve back.
+			int refused = -1;
+			if (reserve_fd_ >= 0) {
 				::close(reserve_fd_);
-				reserve_fd_ = -1;
-				const int refused = ::accept4(listen_fd_, nullptr, nullptr, SOCK_NONBLOCK | SOCK_CLOEXEC);
+				refused = ::accept4(listen_fd_, nullptr, nullptr, SOCK_NONBLOCK | SOCK_CLOEXEC);
 				if (refused >= 0)
 					refuse(refused, "the daemon is out of file descriptors");
 				reserve_fd_ = ::open("/dev/null", O_RDONLY | O_CLOEXEC);
-				continue;
 			}
-			return;
+			if (refused < 0 || reserve_fd_ < 0) {
+				// Nothing was pending, or the reserve is gone: stop watching for connections for a moment
+				// rather than spin on a socket we cannot serve.
+				::epoll_ctl(epoll_fd_, EPOLL_CTL_DEL, listen_fd_, nullptr);
+				listen_paused_until_ns_ = monotonic_ns() + 100'000'000;
+				return;
+			}
+			continue;
 		}
 		if (clients_.size() >= options_.max_clients) {
 			refuse(fd, "too many clients");

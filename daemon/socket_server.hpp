@@ -84,6 +84,7 @@ private:
 	int wake_fd_ = -1;
 	int reserve_fd_ = -1; ///< held open so that a refusal can still accept when descriptors run out
 	int64_t next_refusal_log_ns_ = 0;
+	int64_t listen_paused_until_ns_ = 0; ///< out of descriptors: not watching for connections until then
 	uint64_t refusals_unlogged_ = 0;
 	std::atomic<bool> stop_{false};
 	mutable std::mutex mutex_;

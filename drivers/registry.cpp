@@ -1,20 +1,8 @@
 #include <sstream>
 
-#include "drivers/builtin.hpp"
+#include "drivers/source.hpp"
 
 namespace stereod::drivers {
-
-SourceRegistry SourceRegistry::with_builtin_drivers()
-{
-	SourceRegistry registry;
-	register_sim(registry);
-	register_replay(registry);
-	register_datasets(registry);
-	register_aravis(registry);
-	register_v4l2(registry);
-	register_dc1394(registry);
-	return registry;
-}
 
 void SourceRegistry::add(std::string name, std::string summary, Factory factory)
 {

@@ -9,6 +9,10 @@ packages=(
   # libraries the code links against
   libopencv-dev libeigen3-dev libspdlog-dev libfmt-dev nlohmann-json3-dev libcli11-dev libtoml11-dev
   libsystemd-dev zlib1g-dev libgtest-dev libbenchmark-dev
+  # camera drivers: GigE / USB3 Vision (Aravis), FireWire (libdc1394), MJPG decoding for V4L2 (libjpeg-turbo)
+  libaravis-dev libusb-1.0-0-dev libdc1394-dev libturbojpeg0-dev
+  # camera test beds: fake GigE cameras in a private network namespace; V4L2 drivers in a QEMU-booted kernel
+  aravis-tools aravis-tools-cli iproute2 util-linux qemu-system-x86 busybox-static cpio kmod v4l-utils
   # real photographs for the sim scene's textures and the real-data tests (same files as ../shared/data)
   opencv-doc
   # tools the tests and the README use as real clients
@@ -19,16 +23,28 @@ missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
 done
-if [ ${#missing[@]} -eq 0 ]; then
-  echo "install-deps: all ${#packages[@]} packages present"
-  exit 0
-fi
 if [ "$(id -u)" -ne 0 ]; then
   SUDO=sudo
 else
   SUDO=
 fi
-echo "install-deps: installing ${missing[*]}"
 export DEBIAN_FRONTEND=noninteractive
-$SUDO apt-get update -q
-$SUDO apt-get install -y -q --no-install-recommends "${missing[@]}"
+if [ ${#missing[@]} -eq 0 ]; then
+  echo "install-deps: all ${#packages[@]} packages present"
+else
+  echo "install-deps: installing ${missing[*]}"
+  $SUDO apt-get update -q
+  $SUDO apt-get install -y -q --no-install-recommends "${missing[@]}"
+fi
+
+# The V4L2 test bed builds v4l2loopback for the kernel it boots (Debian's current one), so it needs that
+# kernel's headers; which version that is, only apt can say.
+kver=$(apt-cache depends linux-image-amd64 2>/dev/null | sed -n 's/.*Depends: linux-image-//p' | head -1)
+if [ -z "$kver" ]; then
+  $SUDO apt-get update -q
+  kver=$(apt-cache depends linux-image-amd64 2>/dev/null | sed -n 's/.*Depends: linux-image-//p' | head -1)
+fi
+if [ -n "$kver" ] && ! dpkg-query -W -f='${Status}' "linux-headers-$kver" 2>/dev/null | grep -q "install ok installed"; then
+  echo "install-deps: installing linux-headers-$kver (for the V4L2 test bed's v4l2loopback)"
+  $SUDO apt-get install -y -q --no-install-recommends "linux-headers-$kver" || echo "install-deps: no linux-headers-$kver; the V4L2 bed will run without v4l2loopback"
+fi

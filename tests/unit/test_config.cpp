@@ -1,5 +1,6 @@
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <filesystem>
 #include <fstream>
 
@@ -113,4 +114,88 @@ TEST(Config, DefaultConfigTextParsesBackToTheDefaults)
 	fs::remove(path);
 	EXPECT_EQ(config.source.sim.width, DaemonConfig{}.source.sim.width);
 	EXPECT_EQ(config.output.socket_mode, DaemonConfig{}.output.socket_mode);
+}
+
+// Defects found by a hostile probe (issue 17, section 8): each of these crashed, hung or misled before.
+TEST(ConfigDefects, DeeplyNestedArraysAreRefusedBeforeParsing)
+{
+	// 7,000 nested arrays overflowed the parser's stack (SIGSEGV), as a file and through --set.
+	const std::string deep = std::string(7000, '[') + std::string(7000, ']');
+	const std::string message = error_of("[pipeline]\nworkers = " + deep + "\n");
+	EXPECT_NE(message.find(":2: arrays or tables nested deeper than 32"), std::string::npos) << message;
+	DaemonConfig config;
+	EXPECT_THROW(apply_override("pipeline.workers=" + deep, config), ConfigError);
+	// Brackets inside strings and comments are not nesting.
+	EXPECT_EQ(error_of("[output]\nsocket = \"/tmp/" + std::string(40, '[') + ".sock\" # " + std::string(50, '{') +
+			   "\n"),
+		  "") << "brackets in strings counted";
+}
+
+TEST(ConfigDefects, HugeInputIsRefusedQuickly)
+{
+	std::string many = "[pipeline]\nworkers = [";
+	for (int i = 0; i < 300000; ++i)
+		many += "{a=1},";
+	many += "]\n";
+	const auto start = std::chrono::steady_clock::now();
+	const std::string message = error_of(many);
+	EXPECT_NE(message.find("larger than 1024 KiB"), std::string::npos) << message;
+	EXPECT_LT(std::chrono::steady_clock::now() - start, std::chrono::seconds(2));
+}
+
+TEST(ConfigDefects, OnlyARegularFileIsAConfig)
+{
+	DaemonConfig config;
+	try {
+		load_config_file(fs::temp_directory_path().string(), config);
+		FAIL() << "a directory was accepted";
+	} catch (const ConfigError &e) {
+		EXPECT_NE(std::string(e.what()).find("not a regular file"), std::string::npos) << e.what();
+	}
+	try {
+		load_config_file("/dev/zero", config);
+		FAIL() << "/dev/zero was read as an empty config";
+	} catch (const ConfigError &e) {
+		EXPECT_NE(std::string(e.what()).find("/dev/zero: not a regular file"), std::string::npos) << e.what();
+	}
+}
+
+TEST(ConfigDefects, ControlCharactersInOverridesAreRejected)
+{
+	DaemonConfig config;
+	// A newline once let one override set another key (this one moved the socket).
+	EXPECT_THROW(apply_override("log.level=info\n[output]\nsocket = \"/tmp/evil.sock\"", config), ConfigError);
+	EXPECT_EQ(config.output.socket, "/tmp/stereod.sock");
+	EXPECT_THROW(apply_override(std::string("sim.scene=default") + '\t', config), ConfigError);
+}
+
+TEST(ConfigDefects, SocketPathIsValidatedWithTheConfigAndEchoedShort)
+{
+	DaemonConfig config;
+	try {
+		apply_override("output.socket=\"\"", config);
+		FAIL() << "an empty socket path was accepted";
+	} catch (const ConfigError &e) {
+		EXPECT_NE(std::string(e.what()).find("output.socket: must not be empty"), std::string::npos) << e.what();
+	}
+	const std::string longer(10'000'000, 'x');
+	try {
+		apply_override("output.socket=/tmp/" + longer, config);
+		FAIL() << "a 10 MB socket path was accepted";
+	} catch (const ConfigError &e) {
+		const std::string what = e.what();
+		EXPECT_NE(what.find("output.socket"), std::string::npos) << what.substr(0, 200);
+		EXPECT_LT(what.size(), 400U) << "the path was echoed in full";
+	}
+}
+
+TEST(Config, AddressLikeBareWordsAreStrings)
+{
+	DaemonConfig config;
+	apply_override("aravis.left=127.0.0.1", config);
+	EXPECT_EQ(config.source.aravis.left, "127.0.0.1");
+	apply_override("aravis.features=[\"ExposureAuto=Off\", \"GainAuto=Off\"]", config);
+	ASSERT_EQ(config.source.aravis.features.size(), 2U);
+	EXPECT_EQ(config.source.aravis.features[1], "GainAuto=Off");
+	EXPECT_THROW(apply_override("aravis.layout=diagonal", config), ConfigError);
 }

@@ -4,6 +4,8 @@
 #include <chrono>
 #include <filesystem>
 #include <fstream>
+#include <fcntl.h>
+#include <sys/resource.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
 #include <sys/un.h>
@@ -210,4 +212,129 @@ TEST(SocketServer, ReplacesAStaleSocketButNotALiveOne)
 	std::ofstream(regular) << "x";
 	EXPECT_THROW(SocketServer({regular, 0660, 16, 1024}), std::runtime_error);
 	fs::remove(regular);
+}
+
+// Defects found by a hostile probe (issue 17, section 8).
+TEST(SocketServerDefects, DestructionUnderConnectionChurnDoesNotCrash)
+{
+	// ~SocketServer iterated clients_ while a failed send erased from it: SIGSEGV in 2 of 22 runs with 200
+	// clients connecting and disconnecting. Here: clients that hang up without reading, with messages queued
+	// for them, destroyed mid-churn, many times.
+	for (int round = 0; round < 20; ++round) {
+		const auto path = socket_path("churn" + std::to_string(round));
+		std::atomic<bool> stop{false};
+		auto server = std::make_unique<SocketServer>(SocketServerOptions{path, 0660, 64, 4096});
+		std::thread churn([&] {
+			while (!stop.load()) {
+				const int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+				const sockaddr_un addr = unix_socket_address(path);
+				if (::connect(fd, reinterpret_cast<const sockaddr *>(&addr), sizeof(addr)) == 0) {
+					int tiny = 1;
+					::setsockopt(fd, SOL_SOCKET, SO_RCVBUF, &tiny, sizeof(tiny));
+				}
+				::close(fd);
+			}
+		});
+		std::vector<int> held;
+		for (int i = 0; i < 20; ++i)
+			held.push_back(connect_to(path));
+		for (int i = 0; i < 200; ++i)
+			server->publish(std::string(2000, 'x'));
+		for (size_t i = 0; i < held.size(); i += 2)
+			::close(held[i]); // peers gone: their flush fails inside the destructor
+		server.reset();
+		stop.store(true);
+		churn.join();
+		for (size_t i = 1; i < held.size(); i += 2)
+			::close(held[i]);
+		EXPECT_FALSE(fs::exists(path));
+	}
+}
+
+TEST(SocketServerDefects, ClientsBeyondTheLimitAreRefusedWithAReason)
+{
+	const auto path = socket_path("limit");
+	SocketServerOptions options{path, 0660, 16, 4096};
+	options.max_clients = 3;
+	SocketServer server(options);
+	server.set_greeting("{\"type\":\"hello\"}");
+	std::vector<int> clients;
+	for (int i = 0; i < 3; ++i)
+		clients.push_back(connect_to(path));
+	ASSERT_TRUE(eventually([&] { return server.stats().clients == 3; }));
+	const int refused = connect_to(path);
+	const auto lines = read_lines(refused, 2);
+	ASSERT_EQ(lines.size(), 1U) << "the refused client should get one line and be closed";
+	EXPECT_EQ(nlohmann::json::parse(lines[0]).at("type"), "error");
+	EXPECT_NE(lines[0].find("too many clients"), std::string::npos);
+	EXPECT_EQ(server.stats().clients_refused, 1U);
+	EXPECT_EQ(server.stats().clients, 3U);
+	for (int fd : clients)
+		::close(fd);
+	::close(refused);
+}
+
+TEST(SocketServerDefects, OutOfDescriptorsRefusesInsteadOfSpinning)
+{
+	// With descriptors exhausted, accept() failed with EMFILE forever: the socket thread spun at 100 %, new
+	// clients never got hello, nothing was logged.
+	const auto path = socket_path("emfile");
+	SocketServer server({path, 0660, 16, 4096});
+	server.set_greeting("{\"type\":\"hello\"}");
+	rlimit old{};
+	::getrlimit(RLIMIT_NOFILE, &old);
+	std::vector<int> filler;
+	rlimit tight = old;
+	tight.rlim_cur = 64;
+	ASSERT_EQ(::setrlimit(RLIMIT_NOFILE, &tight), 0);
+	int probe = 0;
+	while ((probe = ::open("/dev/null", O_RDONLY | O_CLOEXEC)) >= 0)
+		filler.push_back(probe);
+	// One descriptor back for the client side of the connection.
+	::close(filler.back());
+	filler.pop_back();
+	const int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+	ASSERT_GE(fd, 0);
+	const sockaddr_un addr = unix_socket_address(path);
+	ASSERT_EQ(::connect(fd, reinterpret_cast<const sockaddr *>(&addr), sizeof(addr)), 0);
+	timeval tv{3, 0};
+	::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof(tv));
+	const auto lines = read_lines(fd, 2);
+	ASSERT_EQ(lines.size(), 1U);
+	EXPECT_NE(lines[0].find("out of file descriptors"), std::string::npos) << lines[0];
+	EXPECT_EQ(server.stats().clients_refused, 1U);
+	// The thread is not spinning: its CPU time stays flat over half a second.
+	timespec before{}, after{};
+	clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &before);
+	std::this_thread::sleep_for(std::chrono::milliseconds(500));
+	clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &after);
+	const double cpu = static_cast<double>(after.tv_sec - before.tv_sec) + 1e-9 * static_cast<double>(after.tv_nsec - before.tv_nsec);
+	EXPECT_LT(cpu, 0.2) << "the socket thread spins";
+	::close(fd);
+	for (int f : filler)
+		::close(f);
+	::setrlimit(RLIMIT_NOFILE, &old);
+	// Descriptors back: a new client is served again.
+	const int fresh = connect_to(path);
+	const auto hello = read_lines(fresh, 1);
+	ASSERT_EQ(hello.size(), 1U);
+	EXPECT_NE(hello[0].find("hello"), std::string::npos);
+	::close(fresh);
+}
+
+TEST(SocketServerDefects, QueueIsBoundedInBytes)
+{
+	// client_queue = 1000000 let a client that never reads grow memory by 1.6 MB/s.
+	const auto path = socket_path("bytes");
+	SocketServerOptions options{path, 0660, 1000000, 4096};
+	options.client_queue_bytes = 64 * 1024;
+	SocketServer server(options);
+	const int idle = connect_to(path);
+	ASSERT_TRUE(eventually([&] { return server.stats().clients == 1; }));
+	for (int i = 0; i < 2000; ++i)
+		server.publish(std::string(1000, 'y'));
+	// At most 64 KiB queued (plus what the socket buffer took): the rest was dropped and counted.
+	EXPECT_TRUE(eventually([&] { return server.stats().messages_dropped > 1000; }))
+		<< server.stats().messages_dropped;
+	::close(idle);
 }
