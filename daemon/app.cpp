@@ -171,11 +171,10 @@ int run_daemon(const DaemonConfig &config)
 		     to_string(info.geometry.format), info.geometry.stereo ? "stereo, " : "",
 		     info.geometry.depth ? "depth, " : "", info.geometry.nominal_fps);
 
-	SocketServer server({config.output.socket, config.output.socket_mode,
-			     static_cast<size_t>(config.output.client_queue),
-			     static_cast<size_t>(config.output.client_max_input),
-			     static_cast<size_t>(config.output.max_clients),
-			     static_cast<size_t>(config.output.client_queue_bytes)});
+	SocketServer server(
+		{config.output.socket, config.output.socket_mode, static_cast<size_t>(config.output.client_queue),
+		 static_cast<size_t>(config.output.client_max_input), static_cast<size_t>(config.output.max_clients),
+		 static_cast<size_t>(config.output.client_queue_bytes)});
 	server.set_greeting(
 		protocol::hello_message(monotonic_ns(), info.name, info.geometry.width, info.geometry.height));
 	const PipelineOptions options = pipeline_options(config, info.live);
@@ -224,13 +223,14 @@ int run_daemon(const DaemonConfig &config)
 			if (now >= next_log_ns) {
 				next_log_ns = now + 10'000'000'000;
 				const SocketServerStats clients = server.stats();
-				spdlog::info("status: {} {:.1f} fps captured, {:.1f} published, latency p50 {:.1f} ms p99 "
-					     "{:.1f} ms, {} clients ({} connected, {} hung up, {} dropped, {} refused "
-					     "since start)",
-					     report.source_state, report.capture_fps, report.publish_fps,
-					     report.capture_to_publish.p50_ms, report.capture_to_publish.p99_ms,
-					     report.clients, clients.accepted, clients.clients_closed,
-					     clients.clients_dropped, clients.clients_refused);
+				spdlog::info(
+					"status: {} {:.1f} fps captured, {:.1f} published, latency p50 {:.1f} ms p99 "
+					"{:.1f} ms, {} clients ({} connected, {} hung up, {} dropped, {} refused "
+					"since start)",
+					report.source_state, report.capture_fps, report.publish_fps,
+					report.capture_to_publish.p50_ms, report.capture_to_publish.p99_ms,
+					report.clients, clients.accepted, clients.clients_closed,
+					clients.clients_dropped, clients.clients_refused);
 			}
 		}
 		if (pipeline.finished()) {
@@ -242,8 +242,11 @@ int run_daemon(const DaemonConfig &config)
 	}
 	emit_status();
 	const auto final_stats = pipeline.stats();
-	spdlog::info("stopped: {} frames captured, {} published", final_stats.frames_captured,
-		     final_stats.frames_published);
+	spdlog::info("stopped: {} frames captured, {} published{}", final_stats.frames_captured,
+		     final_stats.frames_published,
+		     final_stats.dropped_at_stop > 0 ? fmt::format(", {} left unprocessed when the 1.5 s drain ran out",
+								   final_stats.dropped_at_stop)
+						     : std::string());
 	return 0;
 }
 
@@ -349,6 +352,10 @@ int run_batch(DaemonConfig config, const BatchOptions &options)
 		     s.corrupt, s.processing_errors);
 	for (const auto &line : pipeline.source_report())
 		spdlog::info("{}", line);
+	// A source that announced its length and ended early (a video cut short) says so.
+	if (!interrupted && info.frame_count > 0 && s.frames_captured < info.frame_count)
+		spdlog::warn("the input ended early: {} announced {} frames, {} were read ({} missing)", info.name,
+			     info.frame_count, s.frames_captured, info.frame_count - s.frames_captured);
 	if (!*out)
 		throw ConfigError("--output " + options.output + ": write failed");
 	return interrupted ? 130 : 0;

@@ -21,8 +21,8 @@ struct PipelineConfig {
 struct OutputConfig {
 	std::string socket = "/tmp/stereod.sock";
 	int socket_mode = 0660;
-	int client_queue = 256;	     ///< messages buffered per client before its oldest are dropped
-	int client_max_input = 4096; ///< bytes a client may send before it is dropped as misbehaving
+	int client_queue = 256;		  ///< messages buffered per client before its oldest are dropped
+	int client_max_input = 4096;	  ///< bytes a client may send before it is dropped as misbehaving
 	int client_queue_bytes = 8 << 20; ///< bytes queued per client before its oldest messages are dropped
 	int max_clients = 64;		  ///< clients served at once; more are refused with an error line
 	double status_interval_s = 1.0;

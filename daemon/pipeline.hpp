@@ -35,7 +35,8 @@ struct PipelineOptions {
 	size_t workers = 2;
 	size_t ring_capacity = 8;
 	OverflowPolicy overflow = OverflowPolicy::DropOldest;
-	int worker_nice = 5; ///< workers run this much nicer than capture (0 = same priority)
+	int worker_nice = 5;			///< workers run this much nicer than capture (0 = same priority)
+	int64_t drain_limit_ns = 1'500'000'000; ///< live sources: how long a stop may spend on the backlog
 	vision::MotionParams motion;
 };
 
@@ -49,6 +50,7 @@ struct PipelineStats {
 	uint64_t corrupt = 0;		///< frames marked corrupt by the source
 	uint64_t processing_errors = 0; ///< frames a stage threw on
 	uint64_t reconnects = 0;
+	uint64_t dropped_at_stop = 0; ///< live backlog left unprocessed when the drain time ran out
 	protocol::LatencySummary capture_to_publish;
 };
 
@@ -125,7 +127,8 @@ private:
 	std::atomic<bool> stop_{false};
 	std::atomic<bool> finished_{false};
 	std::atomic<uint64_t> captured_{0}, published_{0}, pool_exhausted_{0}, source_gaps_{0}, corrupt_{0},
-		processing_errors_{0}, reconnects_{0};
+		processing_errors_{0}, reconnects_{0}, dropped_at_stop_{0};
+	std::atomic<int64_t> stop_deadline_ns_{0};
 	mutable std::mutex state_mutex_;
 	std::string state_ = "starting";
 	LatencyWindow latency_{2048};

@@ -240,9 +240,9 @@ void SocketServer::accept_clients()
 		if (fd < 0) {
 			if (errno != EMFILE && errno != ENFILE)
 				return; // EAGAIN: nothing more pending
-			// Out of descriptors (accept fails so even with nothing pending). A pending connection would keep
-			// the listening socket readable and this thread spinning: free the reserve, accept it to refuse
-			// it, take the reserve back.
+			// Out of descriptors (accept fails so even with nothing pending). A pending connection would
+			// keep the listening socket readable and this thread spinning: free the reserve, accept it to
+			// refuse it, take the reserve back.
 			int refused = -1;
 			if (reserve_fd_ >= 0) {
 				::close(reserve_fd_);
@@ -252,8 +252,8 @@ void SocketServer::accept_clients()
 				reserve_fd_ = ::open("/dev/null", O_RDONLY | O_CLOEXEC);
 			}
 			if (refused < 0 || reserve_fd_ < 0) {
-				// Nothing was pending, or the reserve is gone: stop watching for connections for a moment
-				// rather than spin on a socket we cannot serve.
+				// Nothing was pending, or the reserve is gone: stop watching for connections for a
+				// moment rather than spin on a socket we cannot serve.
 				::epoll_ctl(epoll_fd_, EPOLL_CTL_DEL, listen_fd_, nullptr);
 				listen_paused_until_ns_ = monotonic_ns() + 100'000'000;
 				return;

@@ -30,8 +30,8 @@ PixelFormat choose_output(const std::string &color, camera::Mosaic mosaic, bool 
 	throw SourceError(section + ".color = \"" + color + "\": must be auto, mono or bgr");
 }
 
-void fill_eyes(const PixelRecipe &recipe, const uint8_t *data, size_t size, int width, int height,
-	       EyeScratch &scratch, cv::Mat &left, cv::Mat *right)
+void fill_eyes(const PixelRecipe &recipe, const uint8_t *data, size_t size, int width, int height, EyeScratch &scratch,
+	       cv::Mat &left, cv::Mat *right)
 {
 	const size_t stride = static_cast<size_t>(width) * static_cast<size_t>(recipe.bytes_per_pixel);
 	if (size < stride * static_cast<size_t>(height))

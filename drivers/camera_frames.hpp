@@ -17,8 +17,8 @@ namespace stereod::drivers {
 /// format; applied to every buffer by fill_eyes().
 struct PixelRecipe {
 	camera::StereoLayout layout = camera::StereoLayout::Pair;
-	int bytes_per_pixel = 1;   ///< of the camera's stream: 1 (8-bit), 2 (16-bit), 3 (RGB8)
-	bool rgb = false;	   ///< the stream is RGB8 (pair layout)
+	int bytes_per_pixel = 1;    ///< of the camera's stream: 1 (8-bit), 2 (16-bit), 3 (RGB8)
+	bool rgb = false;	    ///< the stream is RGB8 (pair layout)
 	bool first_is_left = false; ///< interleaved16: byte 0 of each pixel is the left eye
 	camera::Mosaic mosaic = camera::Mosaic::None;
 	PixelFormat output = PixelFormat::Mono8;
@@ -41,7 +41,7 @@ struct EyeScratch {
 /// Writes the eyes carried by one buffer (the whole stereo pair, or with Pair layout one eye into `left`)
 /// into frame images. At most one pass over the pixels for monochrome, two with a mosaic after
 /// de-interleaving. Throws std::runtime_error when the buffer is shorter than its geometry needs.
-void fill_eyes(const PixelRecipe &recipe, const uint8_t *data, size_t size, int width, int height,
-	       EyeScratch &scratch, cv::Mat &left, cv::Mat *right);
+void fill_eyes(const PixelRecipe &recipe, const uint8_t *data, size_t size, int width, int height, EyeScratch &scratch,
+	       cv::Mat &left, cv::Mat *right);
 
 } // namespace stereod::drivers

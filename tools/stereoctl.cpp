@@ -6,9 +6,9 @@
 #include <fstream>
 #include <iomanip>
 #include <iostream>
-#include <thread>
 #include <sys/socket.h>
 #include <sys/un.h>
+#include <thread>
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
@@ -24,8 +24,8 @@
 #include "daemon/socket_server.hpp"
 #include "drivers/replay/recording.hpp"
 #include "tools/common.hpp"
-#include "tools/subcommands.hpp"
 #include "tools/evaluation.hpp"
+#include "tools/subcommands.hpp"
 
 using namespace stereod;
 namespace fs = std::filesystem;
@@ -37,6 +37,19 @@ volatile std::sig_atomic_t g_interrupted = 0; // set by SIGINT/SIGTERM in record
 void on_signal(int)
 {
 	g_interrupted = 1;
+}
+
+/// SIGINT/SIGTERM set g_interrupted and interrupt a blocking recv(): std::signal installs handlers with
+/// SA_RESTART, under which `stereoctl watch` ignored Ctrl-C until data arrived.
+void catch_interrupts()
+{
+	struct sigaction action {
+	};
+	action.sa_handler = on_signal;
+	sigemptyset(&action.sa_mask);
+	action.sa_flags = 0; // no SA_RESTART
+	::sigaction(SIGINT, &action, nullptr);
+	::sigaction(SIGTERM, &action, nullptr);
 }
 
 void add_source_options(CLI::App &cmd, tools::SourceOptions &options)
@@ -132,8 +145,7 @@ int record(const tools::SourceOptions &options, const std::string &output, uint6
 					 std::chrono::system_clock::now().time_since_epoch())
 					 .count();
 	drivers::RecordingWriter writer(output, header);
-	std::signal(SIGINT, on_signal);
-	std::signal(SIGTERM, on_signal);
+	catch_interrupts();
 	const int64_t start = monotonic_ns();
 	while (!g_interrupted) {
 		if (max_frames > 0 && writer.frames_written() >= max_frames)
@@ -538,7 +550,7 @@ int main(int argc, char **argv)
 	}
 	try {
 		if (*watch_cmd) {
-			std::signal(SIGINT, on_signal);
+			catch_interrupts();
 			return watch(socket_path, raw, max_frames, timeout_s);
 		}
 		if (*record_cmd)

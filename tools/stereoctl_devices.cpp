@@ -17,8 +17,9 @@ int list_everything(bool aravis_only, bool v4l2_only)
 		std::cout << "aravis (GigE Vision, USB3 Vision):\n";
 		const auto cameras = drivers::aravis::list_devices();
 		for (const auto &d : cameras) {
-			std::cout << "  " << d.id << "\n    " << d.transport << (d.address.empty() ? "" : " at " + d.address)
-				  << ", " << d.vendor << " " << d.model << ", serial " << d.serial << "\n";
+			std::cout << "  " << d.id << "\n    " << d.transport
+				  << (d.address.empty() ? "" : " at " + d.address) << ", " << d.vendor << " " << d.model
+				  << ", serial " << d.serial << "\n";
 			if (!d.error.empty()) {
 				std::cout << "    cannot open: " << d.error << "\n";
 				continue;
@@ -54,8 +55,9 @@ int list_everything(bool aravis_only, bool v4l2_only)
 		found += capture;
 	}
 	if (!aravis_only && !v4l2_only)
-		std::cout << "dc1394 (FireWire Bumblebee2 / XB3): start with source.driver = \"dc1394\"; it names every "
-			     "GUID it finds\n";
+		std::cout
+			<< "dc1394 (FireWire Bumblebee2 / XB3): start with source.driver = \"dc1394\"; it names every "
+			   "GUID it finds\n";
 	return found > 0 ? 0 : 1;
 }
 

@@ -49,7 +49,8 @@ int export_recording(const std::string &input, const std::string &output, const 
 	uint64_t n = 0;
 	while (reader.next(frame)) {
 		char name[32];
-		std::snprintf(name, sizeof(name), kitti ? "%010llu.png" : "%06llu.png", static_cast<unsigned long long>(n));
+		std::snprintf(name, sizeof(name), kitti ? "%010llu.png" : "%06llu.png",
+			      static_cast<unsigned long long>(n));
 		if (!cv::imwrite((left_dir / name).string(), frame.left))
 			throw std::runtime_error((left_dir / name).string() + ": cannot write");
 		if (h.geometry.stereo && !cv::imwrite((right_dir / name).string(), frame.right))

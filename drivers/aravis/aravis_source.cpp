@@ -375,8 +375,6 @@ private:
 			state.pending_host = view.arrival_ns;
 		}
 		publish_statistics(state);
-		spdlog::trace("aravis: {} id {} device {} arrival {} mapped {}", &state == &cams_[kLeft] ? "L" : "R",
-			      view.frame_id, view.device_ns, view.arrival_ns, state.pending_host);
 		return true;
 	}
 

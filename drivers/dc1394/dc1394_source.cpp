@@ -18,8 +18,8 @@ namespace stereod::drivers {
 namespace {
 
 // Point Grey registers (offsets from the camera's command registers).
-constexpr uint64_t kBayerTileMapping = 0x1040;	 ///< four ASCII letters: "RGGB", ..., "YYYY" for monochrome
-constexpr uint64_t kFrameInfo = 0x12F8;		 ///< bit 0: embed the cycle-time stamp in the first 4 bytes
+constexpr uint64_t kBayerTileMapping = 0x1040; ///< four ASCII letters: "RGGB", ..., "YYYY" for monochrome
+constexpr uint64_t kFrameInfo = 0x12F8;	       ///< bit 0: embed the cycle-time stamp in the first 4 bytes
 constexpr uint32_t kFrameInfoTimestamp = 0x1;
 
 std::string guid_text(uint64_t guid)
@@ -43,8 +43,9 @@ public:
 		// libdc1394 prints its own errors to stderr; ours say the same with context.
 		context_.reset(dc1394_new());
 		if (!context_)
-			throw SourceError("dc1394: cannot start libdc1394 (no FireWire stack: is firewire-ohci loaded and "
-					  "/dev/fw* readable?)");
+			throw SourceError(
+				"dc1394: cannot start libdc1394 (no FireWire stack: is firewire-ohci loaded and "
+				"/dev/fw* readable?)");
 		open_camera();
 		int64_t eye_w = 0, eye_h = 0;
 		{
@@ -83,7 +84,8 @@ public:
 		into.reset_metadata();
 		// libdc1394's own timestamp is the host's real-time clock at DMA completion, in microseconds;
 		// carry it onto CLOCK_MONOTONIC by its age.
-		const int64_t arrival = last_frame_ns_ - (realtime_ns() - static_cast<int64_t>(frame->timestamp) * 1000);
+		const int64_t arrival =
+			last_frame_ns_ - (realtime_ns() - static_cast<int64_t>(frame->timestamp) * 1000);
 		int64_t device = 0;
 		if (embedded_stamp_) {
 			const uint8_t *b = frame->image;
@@ -152,41 +154,46 @@ private:
 				chosen = guid;
 		}
 		if (!chosen)
-			throw SourceError(
-				"dc1394: " +
-				(config_.guid.empty() ? std::string("no FireWire camera found")
-						      : "no camera with dc1394.guid = " + config_.guid) +
-				(found.empty() ? " (the bus is empty or /dev/fw* is not accessible)" : "; found: " + found));
+			throw SourceError("dc1394: " +
+					  (config_.guid.empty() ? std::string("no FireWire camera found")
+								: "no camera with dc1394.guid = " + config_.guid) +
+					  (found.empty() ? " (the bus is empty or /dev/fw* is not accessible)"
+							 : "; found: " + found));
 		camera_.reset(dc1394_camera_new(context_.get(), chosen));
 		if (!camera_)
 			throw SourceError("dc1394: camera " + guid_text(chosen) + " found but cannot be opened");
-		description_ = std::string(camera_->vendor) + " " + camera_->model + " (guid " + guid_text(chosen) + ")";
+		description_ =
+			std::string(camera_->vendor) + " " + camera_->model + " (guid " + guid_text(chosen) + ")";
 		auto check = [&](dc1394error_t err, const char *what) {
 			if (err != DC1394_SUCCESS)
-				throw SourceError("dc1394: " + description_ + ": " + what + ": " + dc1394_error_get_string(err));
+				throw SourceError("dc1394: " + description_ + ": " + what + ": " +
+						  dc1394_error_get_string(err));
 		};
 		uint32_t tile = 0;
-		check(dc1394_get_control_register(camera_.get(), kBayerTileMapping, &tile), "reading BAYER_TILE_MAPPING");
+		check(dc1394_get_control_register(camera_.get(), kBayerTileMapping, &tile),
+		      "reading BAYER_TILE_MAPPING");
 		const std::string tile_text{static_cast<char>(tile >> 24), static_cast<char>(tile >> 16),
 					    static_cast<char>(tile >> 8), static_cast<char>(tile)};
 		recipe_.layout = camera::StereoLayout::Interleaved16;
 		recipe_.bytes_per_pixel = 2;
 		recipe_.first_is_left = config_.first_byte == "left";
-		recipe_.mosaic = config_.bayer == "auto" ? (tile_text == "YYYY" ? camera::Mosaic::None
-											: parse_mosaic(tile_text, "dc1394 (camera register)"))
-							 : parse_mosaic(config_.bayer, "dc1394");
+		recipe_.mosaic = config_.bayer == "auto"
+					 ? (tile_text == "YYYY" ? camera::Mosaic::None
+								: parse_mosaic(tile_text, "dc1394 (camera register)"))
+					 : parse_mosaic(config_.bayer, "dc1394");
 		recipe_.output = choose_output(config_.color, recipe_.mosaic, false, "dc1394");
 		check(dc1394_video_set_iso_speed(camera_.get(), DC1394_ISO_SPEED_400), "setting ISO speed 400");
 		check(dc1394_video_set_mode(camera_.get(), DC1394_VIDEO_MODE_FORMAT7_3), "selecting Format_7 Mode 3");
 		const dc1394color_coding_t coding =
 			recipe_.mosaic == camera::Mosaic::None ? DC1394_COLOR_CODING_MONO16 : DC1394_COLOR_CODING_RAW16;
-		check(dc1394_format7_set_roi(camera_.get(), DC1394_VIDEO_MODE_FORMAT7_3, coding,
-					     DC1394_USE_MAX_AVAIL, 0, 0, DC1394_QUERY_FROM_CAMERA, DC1394_QUERY_FROM_CAMERA),
+		check(dc1394_format7_set_roi(camera_.get(), DC1394_VIDEO_MODE_FORMAT7_3, coding, DC1394_USE_MAX_AVAIL,
+					     0, 0, DC1394_QUERY_FROM_CAMERA, DC1394_QUERY_FROM_CAMERA),
 		      "setting the Format_7 ROI");
 		if (config_.model == "xb3") {
 			// The XB3 carries three sensors; its PAN control picks the pair sent in Mode 3
 			// (Point Grey: 0 = right + middle, the narrow baseline; 1 = right + left, the wide one).
-			check(dc1394_feature_set_value(camera_.get(), DC1394_FEATURE_PAN, config_.sensors == "wide" ? 1 : 0),
+			check(dc1394_feature_set_value(camera_.get(), DC1394_FEATURE_PAN,
+						       config_.sensors == "wide" ? 1 : 0),
 			      "selecting the XB3 sensor pair (PAN)");
 		}
 		uint32_t info = 0;
@@ -194,8 +201,9 @@ private:
 				  dc1394_set_control_register(camera_.get(), kFrameInfo, info | kFrameInfoTimestamp) ==
 					  DC1394_SUCCESS;
 		if (!embedded_stamp_)
-			spdlog::warn("dc1394: {}: no embedded cycle-time stamps; timestamps are the host's arrival time",
-				     description_);
+			spdlog::warn(
+				"dc1394: {}: no embedded cycle-time stamps; timestamps are the host's arrival time",
+				description_);
 		check(dc1394_capture_setup(camera_.get(), 8, DC1394_CAPTURE_FLAGS_DEFAULT), "setting up DMA capture");
 		check(dc1394_video_set_transmission(camera_.get(), DC1394_ON), "starting transmission");
 		clock_.reset();

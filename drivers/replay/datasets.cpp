@@ -227,11 +227,14 @@ Index kitti(const std::string &drive_dir)
 	};
 	const auto [left_files, left_stamps] = read_camera("image_02");
 	const auto [right_files, right_stamps] = read_camera("image_03");
-	const size_t n = std::min(left_files.size(), right_files.size());
+	// Pairing by index after a frame is missing on one side would pair frames a second apart and call them
+	// `ok` (found by a hostile probe): unequal counts stop here, as docs/sources.md says.
 	if (left_files.size() != right_files.size())
-		index.notes.push_back("kitti: image_02 has " + std::to_string(left_files.size()) +
-				      " frames, image_03 " + std::to_string(right_files.size()) + "; using the first " +
-				      std::to_string(n));
+		throw SourceError("kitti: " + (root / "image_02").string() + " has " +
+				  std::to_string(left_files.size()) + " frames but image_03 has " +
+				  std::to_string(right_files.size()) +
+				  "; a frame is missing on one side, so pairs cannot be formed by index");
+	const size_t n = left_files.size();
 	for (size_t i = 0; i < n; ++i)
 		index.entries.push_back({left_stamps[i],
 					 right_stamps[i] - left_stamps[i],
@@ -298,9 +301,20 @@ Index folder_pair(const std::string &dir, double fps)
 	std::vector<int64_t> stamps;
 	if (std::ifstream in(root / "timestamps.txt"); in) {
 		std::string line;
-		while (std::getline(in, line))
-			if (!trim(line).empty())
+		int number = 0;
+		while (std::getline(in, line)) {
+			++number;
+			if (trim(line).empty())
+				continue;
+			try {
 				stamps.push_back(seconds_to_ns(trim(line)));
+			} catch (const std::exception &) {
+				// Used to surface as a bare "stereod: stoll".
+				throw SourceError("folder: " + (root / "timestamps.txt").string() + ":" +
+						  std::to_string(number) + ": not a time in seconds: '" +
+						  trim(line).substr(0, 40) + "'");
+			}
+		}
 		if (stamps.size() != left.size())
 			throw SourceError("folder: " + (root / "timestamps.txt").string() + " has " +
 					  std::to_string(stamps.size()) + " lines for " + std::to_string(left.size()) +

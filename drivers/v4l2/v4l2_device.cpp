@@ -40,9 +40,9 @@ std::string sizes_text(int fd, uint32_t fourcc)
 	size.pixel_format = fourcc;
 	for (size.index = 0; xioctl(fd, VIDIOC_ENUM_FRAMESIZES, &size) == 0; ++size.index) {
 		if (size.type != V4L2_FRMSIZE_TYPE_DISCRETE) {
-			out += " " + std::to_string(size.stepwise.min_width) + "x" + std::to_string(size.stepwise.min_height) +
-			       ".." + std::to_string(size.stepwise.max_width) + "x" +
-			       std::to_string(size.stepwise.max_height);
+			out += " " + std::to_string(size.stepwise.min_width) + "x" +
+			       std::to_string(size.stepwise.min_height) + ".." +
+			       std::to_string(size.stepwise.max_width) + "x" + std::to_string(size.stepwise.max_height);
 			break;
 		}
 		out += " " + std::to_string(size.discrete.width) + "x" + std::to_string(size.discrete.height);
@@ -50,8 +50,8 @@ std::string sizes_text(int fd, uint32_t fourcc)
 		interval.pixel_format = fourcc;
 		interval.width = size.discrete.width;
 		interval.height = size.discrete.height;
-		if (xioctl(fd, VIDIOC_ENUM_FRAMEINTERVALS, &interval) == 0 && interval.type == V4L2_FRMIVAL_TYPE_DISCRETE &&
-		    interval.discrete.numerator > 0) {
+		if (xioctl(fd, VIDIOC_ENUM_FRAMEINTERVALS, &interval) == 0 &&
+		    interval.type == V4L2_FRMIVAL_TYPE_DISCRETE && interval.discrete.numerator > 0) {
 			char rate[32];
 			std::snprintf(rate, sizeof(rate), "@%.4g",
 				      static_cast<double>(interval.discrete.denominator) / interval.discrete.numerator);
@@ -86,7 +86,8 @@ std::string fourcc_text(uint32_t fourcc)
 uint32_t fourcc_from(const std::string &name)
 {
 	if (name.empty() || name.size() > 4)
-		throw SourceError("v4l2.pixel_format = \"" + name + "\": a fourcc has one to four characters (YUYV, GREY, MJPG)");
+		throw SourceError("v4l2.pixel_format = \"" + name +
+				  "\": a fourcc has one to four characters (YUYV, GREY, MJPG)");
 	std::string padded = name;
 	padded.resize(4, ' ');
 	return v4l2_fourcc(padded[0], padded[1], padded[2], padded[3]);
@@ -116,8 +117,8 @@ V4l2Device::V4l2Device(const std::string &path, const V4l2Config &config) : path
 		for (const auto &entry : std::filesystem::directory_iterator("/dev", ec))
 			if (entry.path().filename().string().rfind("video", 0) == 0)
 				found += (found.empty() ? "" : ", ") + entry.path().string();
-		throw SourceError(path + ": cannot open (" + errno_text() + "); video devices here: " +
-				  (found.empty() ? "none" : found));
+		throw SourceError(path + ": cannot open (" + errno_text() +
+				  "); video devices here: " + (found.empty() ? "none" : found));
 	}
 	try {
 		configure(config);
@@ -197,7 +198,8 @@ void V4l2Device::configure(const V4l2Config &config)
 		parm.parm.capture.timeperframe.numerator = 1000;
 		parm.parm.capture.timeperframe.denominator = static_cast<uint32_t>(config.fps * 1000 + 0.5);
 		if (xioctl(fd_, VIDIOC_S_PARM, &parm) != 0)
-			spdlog::warn("v4l2: {}: cannot set {} fps (VIDIOC_S_PARM: {})", path_, config.fps, errno_text());
+			spdlog::warn("v4l2: {}: cannot set {} fps (VIDIOC_S_PARM: {})", path_, config.fps,
+				     errno_text());
 	}
 	if (xioctl(fd_, VIDIOC_G_PARM, &parm) == 0 && parm.parm.capture.timeperframe.numerator > 0)
 		fps_ = static_cast<double>(parm.parm.capture.timeperframe.denominator) /
@@ -263,7 +265,8 @@ void V4l2Device::set_controls(const std::vector<std::string> &controls)
 			query.id |= V4L2_CTRL_FLAG_NEXT_CTRL;
 		}
 		if (!found)
-			throw SourceError(path_ + ": v4l2.controls: no control '" + name + "' (the device has " + known + ")");
+			throw SourceError(path_ + ": v4l2.controls: no control '" + name + "' (the device has " +
+					  known + ")");
 		if (value < query.minimum || value > query.maximum)
 			throw SourceError(path_ + ": v4l2.controls: " + name + " = " + std::to_string(value) +
 					  " is outside " + std::to_string(query.minimum) + ".." +
@@ -307,8 +310,8 @@ NextResult V4l2Device::next(int timeout_ms, V4l2Buffer &out)
 			     path_);
 		monotonic_ = false;
 	}
-	out.timestamp_ns = monotonic ? int64_t{buffer.timestamp.tv_sec} * 1'000'000'000 + buffer.timestamp.tv_usec * 1000
-				     : now;
+	out.timestamp_ns =
+		monotonic ? int64_t{buffer.timestamp.tv_sec} * 1'000'000'000 + buffer.timestamp.tv_usec * 1000 : now;
 	return NextResult::Frame;
 }
 
@@ -344,12 +347,14 @@ std::vector<DeviceDescription> list_devices()
 			d.card = reinterpret_cast<const char *>(cap.card);
 			d.driver = reinterpret_cast<const char *>(cap.driver);
 			d.bus = reinterpret_cast<const char *>(cap.bus_info);
-			const uint32_t caps = (cap.capabilities & V4L2_CAP_DEVICE_CAPS) ? cap.device_caps : cap.capabilities;
+			const uint32_t caps =
+				(cap.capabilities & V4L2_CAP_DEVICE_CAPS) ? cap.device_caps : cap.capabilities;
 			if (caps & V4L2_CAP_VIDEO_CAPTURE) {
 				v4l2_fmtdesc desc{};
 				desc.type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
 				for (desc.index = 0; xioctl(fd, VIDIOC_ENUM_FMT, &desc) == 0; ++desc.index)
-					d.formats.push_back(fourcc_text(desc.pixelformat) + sizes_text(fd, desc.pixelformat));
+					d.formats.push_back(fourcc_text(desc.pixelformat) +
+							    sizes_text(fd, desc.pixelformat));
 			} else {
 				d.error = "not a capture node";
 			}

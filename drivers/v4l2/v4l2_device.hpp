@@ -14,10 +14,10 @@ namespace stereod::drivers::v4l2 {
 struct V4l2Buffer {
 	uint32_t index = 0;
 	const uint8_t *data = nullptr;
-	size_t size = 0;	 ///< bytes used
-	uint32_t sequence = 0;	 ///< the driver's frame counter
+	size_t size = 0;	  ///< bytes used
+	uint32_t sequence = 0;	  ///< the driver's frame counter
 	int64_t timestamp_ns = 0; ///< the driver's timestamp on CLOCK_MONOTONIC (or the dequeue time, see below)
-	bool error = false;	 ///< the driver flagged the buffer (V4L2_BUF_FLAG_ERROR): data may be damaged
+	bool error = false;	  ///< the driver flagged the buffer (V4L2_BUF_FLAG_ERROR): data may be damaged
 };
 
 enum class NextResult : uint8_t { Frame, Timeout, Lost };

@@ -76,7 +76,8 @@ public:
 	{
 		const auto layout = camera::parse_layout(config_.layout);
 		if (!layout || *layout == camera::StereoLayout::Interleaved16)
-			throw SourceError("v4l2.layout = \"" + config_.layout + "\": must be pair, side_by_side or top_bottom");
+			throw SourceError("v4l2.layout = \"" + config_.layout +
+					  "\": must be pair, side_by_side or top_bottom");
 		layout_ = *layout;
 		paired_ = !config_.right.empty();
 		if (paired_ != (layout_ == camera::StereoLayout::Pair))
@@ -96,10 +97,11 @@ public:
 		if (paired_) {
 			const V4l2Device &right = *devices_[kRight].device;
 			if (right.width() != width_ || right.height() != height_ || right.fourcc() != fourcc_)
-				throw SourceError("v4l2: the two devices differ: left " + std::to_string(width_) + "x" +
-						  std::to_string(height_) + " " + v4l2::fourcc_text(fourcc_) + ", right " +
-						  std::to_string(right.width()) + "x" + std::to_string(right.height()) + " " +
-						  v4l2::fourcc_text(right.fourcc()) + "; set v4l2.width, height, pixel_format");
+				throw SourceError(
+					"v4l2: the two devices differ: left " + std::to_string(width_) + "x" +
+					std::to_string(height_) + " " + v4l2::fourcc_text(fourcc_) + ", right " +
+					std::to_string(right.width()) + "x" + std::to_string(right.height()) + " " +
+					v4l2::fourcc_text(right.fourcc()) + "; set v4l2.width, height, pixel_format");
 		}
 		whole_.create(height_, width_, cv_type(output_));
 		const cv::Size eye = camera::eye_size(layout_, width_, height_);
@@ -123,8 +125,10 @@ public:
 		const int64_t deadline = monotonic_ns() + 100'000'000;
 		for (;;) {
 			for (size_t side : {kLeft, kRight})
-				if ((side == kLeft || paired_) && monotonic_ns() - devices_[side].last_frame_ns > no_frame_ns_) {
-					spdlog::warn("v4l2: {}: no frame for {} s", side == kLeft ? config_.left : config_.right,
+				if ((side == kLeft || paired_) &&
+				    monotonic_ns() - devices_[side].last_frame_ns > no_frame_ns_) {
+					spdlog::warn("v4l2: {}: no frame for {} s",
+						     side == kLeft ? config_.left : config_.right,
 						     config_.no_frame_timeout_s);
 					return GrabStatus::Lost;
 				}
@@ -150,7 +154,8 @@ public:
 				if (r == NextResult::Timeout)
 					continue;
 			}
-			switch (camera::pair_action(left.pending.timestamp_ns, right.pending.timestamp_ns, max_skew_ns_)) {
+			switch (camera::pair_action(left.pending.timestamp_ns, right.pending.timestamp_ns,
+						    max_skew_ns_)) {
 			case camera::PairAction::Pair:
 				return emit(into, left, &right);
 			case camera::PairAction::DropLeft:
@@ -177,8 +182,8 @@ public:
 			for (size_t side : {kLeft, kRight})
 				if (side == kLeft || paired_) {
 					devices_[side].device.reset();
-					fresh[side] = std::make_unique<V4l2Device>(side == kLeft ? config_.left : config_.right,
-										   config_);
+					fresh[side] = std::make_unique<V4l2Device>(
+						side == kLeft ? config_.left : config_.right, config_);
 				}
 		} catch (const SourceError &e) {
 			spdlog::debug("v4l2: reconnect: {}", e.what());
@@ -189,7 +194,8 @@ public:
 				continue;
 			if (fresh[side]->width() != width_ || fresh[side]->height() != height_ ||
 			    fresh[side]->fourcc() != fourcc_) {
-				spdlog::warn("v4l2: {} came back with another format; retrying", fresh[side]->description());
+				spdlog::warn("v4l2: {} came back with another format; retrying",
+					     fresh[side]->description());
 				return false;
 			}
 			devices_[side].device = std::move(fresh[side]);
@@ -198,7 +204,8 @@ public:
 		}
 		const double outage_s = static_cast<double>(monotonic_ns() - outage_start_ns_) * 1e-9;
 		if (info_.geometry.nominal_fps > 0)
-			outage_frames_.fetch_add(static_cast<uint64_t>(std::llround(outage_s * info_.geometry.nominal_fps)));
+			outage_frames_.fetch_add(
+				static_cast<uint64_t>(std::llround(outage_s * info_.geometry.nominal_fps)));
 		outage_start_ns_ = 0;
 		return true;
 	}
@@ -213,8 +220,10 @@ public:
 			if (side == kRight && !paired_)
 				continue;
 			const std::string prefix = side == kLeft ? "left_" : "right_";
-			out.device[prefix + "missing_frames"] = static_cast<int64_t>(devices_[side].missing_frames.load());
-			out.device[prefix + "error_buffers"] = static_cast<int64_t>(devices_[side].error_buffers.load());
+			out.device[prefix + "missing_frames"] =
+				static_cast<int64_t>(devices_[side].missing_frames.load());
+			out.device[prefix + "error_buffers"] =
+				static_cast<int64_t>(devices_[side].error_buffers.load());
 		}
 		out.device["skew_last_ns"] = skew_last_.load();
 		return out;
@@ -239,7 +248,8 @@ private:
 		case V4L2_PIX_FMT_BGR24:
 			return;
 		default:
-			throw SourceError(device.description() + ": pixel format " + v4l2::fourcc_text(device.fourcc()) +
+			throw SourceError(device.description() + ": pixel format " +
+					  v4l2::fourcc_text(device.fourcc()) +
 					  " is not supported (GREY, YUYV, MJPG, RGB3, BGR3); set v4l2.pixel_format");
 		}
 	}

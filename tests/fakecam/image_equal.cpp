@@ -17,7 +17,8 @@ int main(int argc, char **argv)
 		return 2;
 	}
 	if (a.size() != b.size() || a.type() != b.type()) {
-		std::printf("differ: %dx%d type %d vs %dx%d type %d\n", a.cols, a.rows, a.type(), b.cols, b.rows, b.type());
+		std::printf("differ: %dx%d type %d vs %dx%d type %d\n", a.cols, a.rows, a.type(), b.cols, b.rows,
+			    b.type());
 		return 1;
 	}
 	cv::Mat diff;

@@ -37,7 +37,8 @@ void fill(ArvBuffer *buffer, void *data, guint32, guint32, ArvPixelFormat format
 	const cv::Mat &a = pictures.first;
 	for (int y = 0; y < h; ++y) {
 		const unsigned char *row_a = a.ptr<unsigned char>(y % a.rows);
-		const unsigned char *row_b = pictures.second.empty() ? row_a : pictures.second.ptr<unsigned char>(y % a.rows);
+		const unsigned char *row_b =
+			pictures.second.empty() ? row_a : pictures.second.ptr<unsigned char>(y % a.rows);
 		unsigned char *o = out + static_cast<size_t>(y) * static_cast<size_t>(w) * bytes;
 		for (int x = 0; x < w; ++x) {
 			const int sx = x % a.cols;
@@ -77,8 +78,9 @@ int main(int argc, char **argv)
 	if (argc == 4 && std::string(argv[1]) == "--write-grey")
 		return cv::imwrite(argv[3], load(argv[2])) ? 0 : 1;
 	if (argc < 5) {
-		std::fprintf(stderr, "usage: %s ADDRESS SERIAL --image eye.png | --interleave left.png right.png "
-				     "[--first right|left]\n",
+		std::fprintf(stderr,
+			     "usage: %s ADDRESS SERIAL --image eye.png | --interleave left.png right.png "
+			     "[--first right|left]\n",
 			     argv[0]);
 		return 2;
 	}
@@ -87,7 +89,8 @@ int main(int argc, char **argv)
 		pictures.first = load(argv[4]);
 	} else if (std::string(argv[3]) == "--interleave" && argc >= 6) {
 		const cv::Mat left = load(argv[4]), right = load(argv[5]);
-		const bool first_right = !(argc >= 8 && std::string(argv[6]) == "--first" && std::string(argv[7]) == "left");
+		const bool first_right =
+			!(argc >= 8 && std::string(argv[6]) == "--first" && std::string(argv[7]) == "left");
 		pictures.first = first_right ? right : left;
 		pictures.second = first_right ? left : right;
 		if (left.size() != right.size()) {

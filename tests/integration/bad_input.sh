@@ -32,3 +32,14 @@ truncate -s $(($(stat -c %s "$WORK/five.srec") - 10)) "$WORK/five.srec"
 [ "$(wc -l <"$WORK/five.ndjson")" -eq 4 ] || fail "truncated recording: want the 4 complete frames"
 grep -q "4 complete frames recovered; cut at byte" "$WORK/err" || fail "no cut report: $(cat "$WORK/err")"
 pass "truncated recording: $(grep -o 'replay: .*' "$WORK/err")"
+
+# A video cut in half: the frames that are there are processed, and the early end is said (it used to exit 0
+# with no word, though the container had announced 795 frames).
+VIDEO=/usr/share/doc/opencv-doc/examples/data/vtest.avi
+if [ -f "$VIDEO" ]; then
+	head -c $(($(stat -c %s "$VIDEO") / 2)) "$VIDEO" >"$WORK/half.avi"
+	"$STEREOD" process --input "$WORK/half.avi" --output "$WORK/half.ndjson" --set features.enabled=false \
+		2>"$WORK/err" || fail "half video: $(tail -3 "$WORK/err")"
+	grep -q "the input ended early: video announced 795 frames" "$WORK/err" || fail "no early-end warning: $(tail -3 "$WORK/err")"
+	pass "video cut in half: $(grep -o 'the input ended early.*' "$WORK/err")"
+fi

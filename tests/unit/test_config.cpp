@@ -128,7 +128,8 @@ TEST(ConfigDefects, DeeplyNestedArraysAreRefusedBeforeParsing)
 	// Brackets inside strings and comments are not nesting.
 	EXPECT_EQ(error_of("[output]\nsocket = \"/tmp/" + std::string(40, '[') + ".sock\" # " + std::string(50, '{') +
 			   "\n"),
-		  "") << "brackets in strings counted";
+		  "")
+		<< "brackets in strings counted";
 }
 
 TEST(ConfigDefects, HugeInputIsRefusedQuickly)
@@ -176,7 +177,8 @@ TEST(ConfigDefects, SocketPathIsValidatedWithTheConfigAndEchoedShort)
 		apply_override("output.socket=\"\"", config);
 		FAIL() << "an empty socket path was accepted";
 	} catch (const ConfigError &e) {
-		EXPECT_NE(std::string(e.what()).find("output.socket: must not be empty"), std::string::npos) << e.what();
+		EXPECT_NE(std::string(e.what()).find("output.socket: must not be empty"), std::string::npos)
+			<< e.what();
 	}
 	const std::string longer(10'000'000, 'x');
 	try {

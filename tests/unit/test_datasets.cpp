@@ -1,6 +1,8 @@
 // Each importer on a small fixture built here in the dataset's real layout.
 #include <gtest/gtest.h>
 
+#include <cstdio>
+
 #include <filesystem>
 #include <fstream>
 
@@ -232,4 +234,46 @@ TEST(Datasets, VideoFileTimestampsFollowTheFrameRate)
 	ASSERT_EQ(stamps.size(), 6U);
 	for (size_t i = 0; i < stamps.size(); ++i)
 		EXPECT_EQ(stamps[i], static_cast<int64_t>(i) * 80'000'000) << "12.5 fps -> 80 ms apart";
+}
+
+TEST(DatasetDefects, KittiWithAFrameMissingOnOneSideStops)
+{
+	// It used to warn and pair by index: after the gap, pairs were a second apart and still `ok`.
+	TempDir dir;
+	for (const char *cam : {"image_02", "image_03"}) {
+		const int frames = std::string(cam) == "image_02" ? 3 : 2;
+		fs::create_directories(dir.path() / cam / "data");
+		std::ofstream stamps(dir.path() / cam / "timestamps.txt");
+		for (int i = 0; i < frames; ++i) {
+			char name[32];
+			std::snprintf(name, sizeof(name), "%010d.png", i);
+			write_image(dir.path() / cam / "data" / name, i);
+			stamps << "2011-09-26 13:02:2" << i << ".0\n";
+		}
+	}
+	try {
+		open("kitti", dir.path());
+		FAIL() << "unequal left/right counts were accepted";
+	} catch (const SourceError &e) {
+		EXPECT_NE(std::string(e.what()).find("has 3 frames but image_03 has 2"), std::string::npos) << e.what();
+	}
+}
+
+TEST(DatasetDefects, BadFolderTimestampNamesFileAndLine)
+{
+	// It used to say only "stereod: stoll".
+	TempDir dir;
+	for (int i = 0; i < 2; ++i) {
+		write_image(dir.path() / "left" / ("l" + std::to_string(i) + ".png"), i);
+		write_image(dir.path() / "right" / ("r" + std::to_string(i) + ".png"), i);
+	}
+	std::ofstream(dir.path() / "timestamps.txt") << "5.0\nsoon\n";
+	try {
+		datasets::folder_pair(dir.path().string(), 10.0);
+		FAIL() << "a non-numeric timestamp was accepted";
+	} catch (const SourceError &e) {
+		EXPECT_NE(std::string(e.what()).find("timestamps.txt:2: not a time in seconds: 'soon'"),
+			  std::string::npos)
+			<< e.what();
+	}
 }

@@ -2,9 +2,9 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <fcntl.h>
 #include <filesystem>
 #include <fstream>
-#include <fcntl.h>
 #include <sys/resource.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
@@ -308,7 +308,8 @@ TEST(SocketServerDefects, OutOfDescriptorsRefusesInsteadOfSpinning)
 	clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &before);
 	std::this_thread::sleep_for(std::chrono::milliseconds(500));
 	clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &after);
-	const double cpu = static_cast<double>(after.tv_sec - before.tv_sec) + 1e-9 * static_cast<double>(after.tv_nsec - before.tv_nsec);
+	const double cpu = static_cast<double>(after.tv_sec - before.tv_sec) +
+			   1e-9 * static_cast<double>(after.tv_nsec - before.tv_nsec);
 	EXPECT_LT(cpu, 0.2) << "the socket thread spins";
 	::close(fd);
 	for (int f : filler)

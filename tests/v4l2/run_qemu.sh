@@ -21,14 +21,14 @@ elapsed() { awk -v a="$T0" -v b="$(date +%s.%N)" 'BEGIN { printf "%.1f", b - a }
 
 # 1. Debian's kernel and modules, unpacked, never installed (cached between runs).
 if [ ! -f "$CACHE/kimg/boot/vmlinuz-$KVER" ]; then
-	(cd "$CACHE/deb" && apt-get download -q "linux-image-$KVER" >/dev/null) || skip "cannot download linux-image-$KVER"
+	(cd "$CACHE/deb" && apt-get download -q -o APT::Sandbox::User=root "linux-image-$KVER" >/dev/null) || skip "cannot download linux-image-$KVER"
 	rm -rf "$CACHE/kimg"
 	dpkg -x "$CACHE"/deb/linux-image-"$KVER"_*.deb "$CACHE/kimg"
 fi
 # 2. v4l2loopback, built against the matching headers when they are installed (install-deps does).
 LOOP_KO=$CACHE/v4l2loopback/v4l2loopback.ko
 if [ ! -f "$LOOP_KO" ] && [ -d "/usr/src/linux-headers-$KVER" ]; then
-	(cd "$CACHE/deb" && apt-get download -q v4l2loopback-dkms >/dev/null) || true
+	(cd "$CACHE/deb" && apt-get download -q -o APT::Sandbox::User=root v4l2loopback-dkms >/dev/null) || true
 	if ls "$CACHE"/deb/v4l2loopback-dkms_*.deb >/dev/null 2>&1; then
 		rm -rf "$CACHE/lb"
 		dpkg -x "$CACHE"/deb/v4l2loopback-dkms_*.deb "$CACHE/lb"

@@ -108,13 +108,15 @@ int main(int argc, char **argv)
 	}
 	const double span = static_cast<double>(last_t - first_t) * 1e-9;
 	const auto counters = source->counters();
-	std::printf("V4L2CHECK %s frames=%d eye=%dx%d fps=%.2f seq_gaps=%llu monotonic=%d max_skew_ms=%.2f not_ok=%d "
-		    "bad_pixels=%d unpaired=%llu (%s)\n",
-		    got == frames && monotonic && (!pattern || bad_pixels == 0) ? "ok" : "FAIL", got, info.geometry.width,
-		    info.geometry.height, got > 1 && span > 0 ? (got - 1) / span : 0.0,
-		    static_cast<unsigned long long>(gaps), monotonic ? 1 : 0, static_cast<double>(max_skew) * 1e-6, not_ok,
-		    bad_pixels, static_cast<unsigned long long>(counters.drops.count("unpaired") ? counters.drops.at("unpaired") : 0),
-		    info.description.c_str());
+	std::printf(
+		"V4L2CHECK %s frames=%d eye=%dx%d fps=%.2f seq_gaps=%llu monotonic=%d max_skew_ms=%.2f not_ok=%d "
+		"bad_pixels=%d unpaired=%llu (%s)\n",
+		got == frames && monotonic && (!pattern || bad_pixels == 0) ? "ok" : "FAIL", got, info.geometry.width,
+		info.geometry.height, got > 1 && span > 0 ? (got - 1) / span : 0.0,
+		static_cast<unsigned long long>(gaps), monotonic ? 1 : 0, static_cast<double>(max_skew) * 1e-6, not_ok,
+		bad_pixels,
+		static_cast<unsigned long long>(counters.drops.count("unpaired") ? counters.drops.at("unpaired") : 0),
+		info.description.c_str());
 	(void)first_seq;
 	return got == frames && monotonic && (!pattern || bad_pixels == 0) ? 0 : 1;
 }

@@ -41,7 +41,8 @@ int main(int argc, char **argv)
 	const int half = w / 2;
 	for (int y = 0; y < h; ++y)
 		for (int x = 0; x < w; ++x)
-			image[static_cast<size_t>(y * w + x)] = stereod::v4l2test::pattern_value(x % half, y, x >= half);
+			image[static_cast<size_t>(y * w + x)] =
+				stereod::v4l2test::pattern_value(x % half, y, x >= half);
 	const auto period = std::chrono::duration<double>(1.0 / fps);
 	auto next = std::chrono::steady_clock::now();
 	for (int i = 0; i < n; ++i) {
