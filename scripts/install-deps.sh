@@ -1,7 +1,12 @@
 #!/usr/bin/env bash
 # Installs every Debian bookworm package stereod needs to build, test and run.
 # One list for the README's two commands and for CI: nothing else is assumed on the machine.
+#   install-deps.sh               what building and running need (the README's first command)
+#   install-deps.sh --test-beds   also the camera test beds' peers: fake GigE cameras, QEMU and a kernel's
+#                                 headers for the V4L2 bed (the second command, and CI)
 set -euo pipefail
+test_beds=false
+[ "${1:-}" = "--test-beds" ] && test_beds=true
 
 packages=(
   # toolchain
@@ -11,13 +16,16 @@ packages=(
   libsystemd-dev zlib1g-dev libgtest-dev libbenchmark-dev
   # camera drivers: GigE / USB3 Vision (Aravis), FireWire (libdc1394), MJPG decoding for V4L2 (libjpeg-turbo)
   libaravis-dev libusb-1.0-0-dev libdc1394-dev libturbojpeg0-dev
-  # camera test beds: fake GigE cameras in a private network namespace; V4L2 drivers in a QEMU-booted kernel
-  aravis-tools aravis-tools-cli iproute2 util-linux qemu-system-x86 busybox-static cpio kmod v4l-utils
   # real photographs for the sim scene's textures and the real-data tests (same files as ../shared/data)
   opencv-doc
   # tools the tests and the README use as real clients
   socat jq procps
 )
+
+if $test_beds; then
+  # camera test beds: fake GigE cameras in a private network namespace; V4L2 drivers in a QEMU-booted kernel
+  packages+=(aravis-tools aravis-tools-cli iproute2 util-linux qemu-system-x86 busybox-static cpio kmod v4l-utils)
+fi
 
 missing=()
 for p in "${packages[@]}"; do
@@ -37,6 +45,7 @@ else
   $SUDO apt-get install -y -q --no-install-recommends "${missing[@]}"
 fi
 
+$test_beds || exit 0
 # The V4L2 test bed builds v4l2loopback for the kernel it boots (Debian's current one), so it needs that
 # kernel's headers; which version that is, only apt can say.
 kver=$(apt-cache depends linux-image-amd64 2>/dev/null | sed -n 's/.*Depends: linux-image-//p' | head -1)

@@ -37,8 +37,8 @@ run)
 	;;
 test)
 	START=$(date +%s)
-	section "installing dependencies"
-	bash scripts/install-deps.sh
+	section "installing dependencies (with the camera test beds)"
+	bash scripts/install-deps.sh --test-beds
 
 	section "format check (clang-format)"
 	mapfile -t sources < <(git ls-files '*.cpp' '*.hpp' 2>/dev/null || find core drivers daemon tools tests -name '*.[ch]pp')
