@@ -244,10 +244,11 @@ int run_daemon(const DaemonConfig &config)
 	const auto final_stats = pipeline.stats();
 	spdlog::info("stopped: {} frames captured, {} published{}", final_stats.frames_captured,
 		     final_stats.frames_published,
-		     final_stats.dropped_at_stop > 0 ? fmt::format(", {} left unprocessed when the {:.1f} s drain ran out",
-								   final_stats.dropped_at_stop,
-								   static_cast<double>(options.drain_limit_ns) * 1e-9)
-						     : std::string());
+		     final_stats.dropped_at_stop > 0
+			     ? fmt::format(", {} left unprocessed when the {:.1f} s drain ran out",
+					   final_stats.dropped_at_stop,
+					   static_cast<double>(options.drain_limit_ns) * 1e-9)
+			     : std::string());
 	return 0;
 }
 

@@ -157,8 +157,9 @@ void Pipeline::dispatch_loop()
 	uint64_t order = 0;
 	const bool live = source_->info().live;
 	while (auto index = ring_.pop()) {
-		// A live source's backlog is drained for a bounded time (drain_limit_ns) after a stop (a 1024-frame ring once took
-		// 5.5 s); what is left then is given back unprocessed and counted. Offline, everything is processed.
+		// A live source's backlog is drained for a bounded time (drain_limit_ns) after a stop (a 1024-frame
+		// ring once took 5.5 s); what is left then is given back unprocessed and counted. Offline, everything
+		// is processed.
 		if (live && stop_.load() && monotonic_ns() > stop_deadline_ns_.load()) {
 			pool_.adopt(*index).reset();
 			dropped_at_stop_.fetch_add(1);
