@@ -15,7 +15,7 @@ struct PipelineConfig {
 	int workers = 0;	       ///< 0 = one per core
 	int ring_capacity = 8;	       ///< frames between capture and processing
 	std::string overflow = "auto"; ///< auto | drop-oldest | block ("auto": drop-oldest for live sources)
-	int worker_nice = 5;	       ///< processing threads run this much nicer than capture
+	int worker_nice = 0;	       ///< processing threads run this much nicer than capture
 };
 
 struct OutputConfig {

@@ -35,7 +35,7 @@ struct PipelineOptions {
 	size_t workers = 2;
 	size_t ring_capacity = 8;
 	OverflowPolicy overflow = OverflowPolicy::DropOldest;
-	int worker_nice = 5;			///< workers run this much nicer than capture (0 = same priority)
+	int worker_nice = 0;			///< workers run this much nicer than capture (0 = same priority)
 	int64_t drain_limit_ns = 1'000'000'000; ///< live sources: how long a stop may spend on the backlog
 	vision::MotionParams motion;
 };
