@@ -31,13 +31,6 @@ struct Error {
 	}
 };
 
-int64_t realtime_ns() noexcept
-{
-	timespec ts{};
-	clock_gettime(CLOCK_REALTIME, &ts);
-	return int64_t{ts.tv_sec} * 1'000'000'000 + ts.tv_nsec;
-}
-
 std::string join(const char **items, guint n)
 {
 	std::string out;

@@ -132,13 +132,6 @@ public:
 	}
 
 private:
-	static int64_t realtime_ns() noexcept
-	{
-		timespec ts{};
-		clock_gettime(CLOCK_REALTIME, &ts);
-		return int64_t{ts.tv_sec} * 1'000'000'000 + ts.tv_nsec;
-	}
-
 	void open_camera()
 	{
 		dc1394camera_list_t *raw_list = nullptr;

@@ -77,7 +77,7 @@ int main(int argc, char **argv)
 	StereoFrame frame;
 	frame.allocate(info.geometry);
 	int got = 0, timeouts = 0, bad_pixels = 0, not_ok = 0;
-	uint64_t first_seq = 0, last_seq = 0, gaps = 0;
+	uint64_t last_seq = 0, gaps = 0;
 	int64_t first_t = 0, last_t = 0, max_skew = 0;
 	bool monotonic = true;
 	while (got < frames && timeouts < 50) {
@@ -91,7 +91,6 @@ int main(int argc, char **argv)
 			continue;
 		}
 		if (got == 0) {
-			first_seq = frame.sequence;
 			first_t = frame.device_ns;
 		} else {
 			gaps += frame.sequence - last_seq - 1;
@@ -117,6 +116,5 @@ int main(int argc, char **argv)
 		bad_pixels,
 		static_cast<unsigned long long>(counters.drops.count("unpaired") ? counters.drops.at("unpaired") : 0),
 		info.description.c_str());
-	(void)first_seq;
 	return got == frames && monotonic && (!pattern || bad_pixels == 0) ? 0 : 1;
 }
