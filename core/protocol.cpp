@@ -94,10 +94,40 @@ std::string frame_message(const FrameResult &result)
 	}
 	message["points"] = std::move(points);
 
-	if (result.ego)
-		message["ego"] = {{"homography", result.ego->homography}, {"inliers", result.ego->inliers}};
-	else
+	if (result.ego) {
+		const EgoMotion &ego = *result.ego;
+		json e = {{"inliers", ego.inliers}};
+		e["homography"] = ego.homography ? json(*ego.homography) : json(nullptr);
+		if (ego.homography)
+			e["homography_inliers"] = ego.homography_inliers;
+		if (ego.valid) {
+			// 1e-7: a tenth of a micrometre, far below any pose's accuracy, and short on the wire.
+			const auto matrix = [](const std::optional<std::array<double, 16>> &m) {
+				if (!m)
+					return json(nullptr);
+				json a = json::array();
+				for (double x : *m)
+					a.push_back(round_to(x, 1e-7));
+				return a;
+			};
+			e["valid"] = *ego.valid;
+			e["T_prev_curr"] = matrix(ego.t_prev_curr);
+			e["T_world_curr"] = matrix(ego.t_world_curr);
+			if (!*ego.valid)
+				e["reason"] = ego.reason;
+		}
+		message["ego"] = std::move(e);
+	} else {
 		message["ego"] = nullptr;
+	}
+	if (result.stereo) {
+		const StereoSummary &s = *result.stereo;
+		message["stereo"] = {{"keypoints", s.keypoints},
+				     {"matched", s.matched},
+				     {"candidates", s.candidates},
+				     {"outside_band", s.outside_band},
+				     {"median_row_diff_px", round_to(s.median_row_diff_px, 0.001)}};
+	}
 
 	json groups = json::array();
 	for (const auto &group : result.groups)
@@ -140,8 +170,29 @@ FrameResult parse_frame_message(const json &message)
 			point.xyz_m = p.at("xyz_m").get<std::array<float, 3>>();
 		result.points.push_back(point);
 	}
-	if (const auto &ego = message.at("ego"); !ego.is_null())
-		result.ego = EgoMotion{ego.at("homography").get<std::array<double, 9>>(), ego.at("inliers").get<int>()};
+	if (const auto &ego = message.at("ego"); !ego.is_null()) {
+		EgoMotion e;
+		e.inliers = ego.at("inliers").get<int>();
+		if (ego.contains("homography") && !ego.at("homography").is_null()) {
+			e.homography = ego.at("homography").get<std::array<double, 9>>();
+			e.homography_inliers = ego.value("homography_inliers", e.inliers);
+		}
+		if (ego.contains("valid")) {
+			e.valid = ego.at("valid").get<bool>();
+			e.reason = ego.value("reason", std::string());
+			for (const auto &[key, field] :
+			     {std::pair{"T_prev_curr", &e.t_prev_curr}, std::pair{"T_world_curr", &e.t_world_curr}})
+				if (ego.contains(key) && !ego.at(key).is_null())
+					*field = ego.at(key).get<std::array<double, 16>>();
+		}
+		result.ego = e;
+	}
+	if (message.contains("stereo")) {
+		const auto &s = message.at("stereo");
+		result.stereo = StereoSummary{s.at("keypoints").get<int>(), s.at("matched").get<int>(),
+					      s.at("candidates").get<int>(), s.at("outside_band").get<int>(),
+					      s.at("median_row_diff_px").get<float>()};
+	}
 	for (const auto &g : message.at("groups"))
 		result.groups.push_back({g.at("id").get<int>(), g.at("position_m").get<std::array<double, 3>>(),
 					 g.at("velocity_mps").get<std::array<double, 3>>(),

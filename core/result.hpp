@@ -29,10 +29,27 @@ struct LabelledPoint {
 	std::optional<std::array<float, 3>> xyz_m; ///< left-camera coordinates, when depth is known
 };
 
-/// Frame-to-frame image motion of the static scene.
+/// The camera's own motion. Monocular sources have the image homography of the static scene only; stereo
+/// and RGB-D sources also have the metric pose (left rectified camera: x right, y down, z forward, metres).
 struct EgoMotion {
-	std::array<double, 9> homography{}; ///< maps previous-frame pixels to this frame's, row-major
-	int inliers = 0;		    ///< static points the final homography was fitted to
+	std::optional<std::array<double, 9>> homography; ///< maps previous-frame pixels to this frame's, row-major
+	int inliers = 0; ///< points the pose (stereo) or else the final homography was fitted to
+	int homography_inliers = 0;
+	/// Stereo/RGB-D: whether the pose below was estimated for this frame; when not, `reason` says why and
+	/// T_world_curr carries the last known pose on.
+	std::optional<bool> valid;
+	std::string reason;
+	std::optional<std::array<double, 16>> t_prev_curr;  ///< previous camera from current, row-major 4x4
+	std::optional<std::array<double, 16>> t_world_curr; ///< world (the first frame's camera) from current
+};
+
+/// Sparse stereo of one frame, and the calibration's health as the matches show it.
+struct StereoSummary {
+	int keypoints = 0;	      ///< left keypoints
+	int matched = 0;	      ///< with a depth
+	int candidates = 0;	      ///< with a descriptor match anywhere in the wide health band
+	int outside_band = 0;	      ///< of those, best match off the epipolar band
+	float median_row_diff_px = 0; ///< v_left - v_right of the matches, sub-pixel
 };
 
 /// A moving-target group (filled by the grouping stage of a later issue).
@@ -62,6 +79,7 @@ struct FrameResult {
 	std::vector<StageTime> timing;
 	std::vector<LabelledPoint> points;
 	std::optional<EgoMotion> ego;
+	std::optional<StereoSummary> stereo;
 	std::vector<TargetGroup> groups;
 };
 

@@ -9,10 +9,12 @@
 
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <spdlog/fmt/fmt.h>
 #include <spdlog/spdlog.h>
 #include <systemd/sd-daemon.h>
 
 #include "core/clock.hpp"
+#include "core/geometry/rig.hpp"
 #include "core/protocol.hpp"
 #include "daemon/pipeline.hpp"
 #include "daemon/socket_server.hpp"
@@ -54,7 +56,28 @@ OverflowPolicy policy_for(const std::string &overflow, bool live)
 	return live ? OverflowPolicy::DropOldest : OverflowPolicy::Block;
 }
 
-PipelineOptions pipeline_options(const DaemonConfig &config, bool live)
+/// The truth's camera poses in the TUM format (timestamp tx ty tz qx qy qz qw; the capture time in seconds),
+/// for `stereoctl eval --poses` and any TUM tool.
+void write_truth_poses(const fs::path &path, const std::map<uint64_t, std::string> &truth_lines)
+{
+	std::ofstream out(path, std::ios::trunc);
+	out << "# the source's true camera poses: world from left camera (x right, y down, z forward), metres\n"
+	       "# timestamp tx ty tz qx qy qz qw\n";
+	for (const auto &[seq, text] : truth_lines) {
+		const auto line = nlohmann::json::parse(text);
+		const auto m = line.at("camera_pose").get<std::array<double, 12>>();
+		cv::Matx33d r;
+		for (int row = 0; row < 3; ++row)
+			for (int col = 0; col < 3; ++col)
+				r(row, col) = m[static_cast<size_t>(row * 4 + col)];
+		const auto q = geometry::quaternion_from_rotation(r);
+		out << fmt::format("{:.9f} {:.9f} {:.9f} {:.9f} {:.9f} {:.9f} {:.9f} {:.9f}\n",
+				   static_cast<double>(line.at("t_capture_ns").get<int64_t>()) * 1e-9, m[3], m[7],
+				   m[11], q[0], q[1], q[2], q[3]);
+	}
+}
+
+PipelineOptions pipeline_options(const DaemonConfig &config, const drivers::SourceInfo &info, bool live)
 {
 	PipelineOptions options;
 	options.workers =
@@ -63,6 +86,7 @@ PipelineOptions pipeline_options(const DaemonConfig &config, bool live)
 	options.overflow = policy_for(config.pipeline.overflow, live);
 	options.worker_nice = config.pipeline.worker_nice;
 	options.motion = config.motion;
+	options.motion.rig = info.calibration;
 	return options;
 }
 
@@ -177,7 +201,7 @@ int run_daemon(const DaemonConfig &config)
 		 static_cast<size_t>(config.output.client_queue_bytes)});
 	server.set_greeting(
 		protocol::hello_message(monotonic_ns(), info.name, info.geometry.width, info.geometry.height));
-	const PipelineOptions options = pipeline_options(config, info.live);
+	const PipelineOptions options = pipeline_options(config, info, info.live);
 	Pipeline pipeline(std::move(source), options,
 			  [&server](FrameResult &result) { server.publish(protocol::frame_message(result)); });
 	pipeline.start();
@@ -283,8 +307,10 @@ int run_batch(DaemonConfig config, const BatchOptions &options)
 	std::map<uint64_t, std::string> truth_lines;
 	if (export_truth)
 		fs::create_directories(fs::path(options.truth_dir) / "masks");
+	if (export_truth && info.geometry.depth)
+		fs::create_directories(fs::path(options.truth_dir) / "depth");
 
-	PipelineOptions pipeline_opts = pipeline_options(config, false);
+	PipelineOptions pipeline_opts = pipeline_options(config, info, false);
 	pipeline_opts.overflow = OverflowPolicy::Block; // batch never drops
 	Pipeline pipeline(std::move(source), pipeline_opts,
 			  [out](FrameResult &result) { *out << protocol::frame_message(result) << '\n'; });
@@ -294,6 +320,16 @@ int run_batch(DaemonConfig config, const BatchOptions &options)
 			std::snprintf(name, sizeof(name), "masks/%06llu.png",
 				      static_cast<unsigned long long>(frame.sequence));
 			cv::imwrite((fs::path(options.truth_dir) / name).string(), frame.truth.object_ids);
+			if (!frame.depth.empty()) {
+				// The true depth as 16-bit millimetres (0 = unknown), for `stereoctl eval`'s depth
+				// score.
+				char depth_name[32];
+				std::snprintf(depth_name, sizeof(depth_name), "depth/%06llu.png",
+					      static_cast<unsigned long long>(frame.sequence));
+				cv::Mat mm;
+				frame.depth.convertTo(mm, CV_16U, 1000.0);
+				cv::imwrite((fs::path(options.truth_dir) / depth_name).string(), mm);
+			}
 			nlohmann::json objects = nlohmann::json::array();
 			for (size_t i = 0; i < frame.truth.object_count; ++i) {
 				const auto &o = frame.truth.objects[i];
@@ -346,6 +382,7 @@ int run_batch(DaemonConfig config, const BatchOptions &options)
 		std::ofstream truth(fs::path(options.truth_dir) / "truth.ndjson", std::ios::trunc);
 		for (const auto &[seq, line] : truth_lines)
 			truth << line << '\n';
+		write_truth_poses(fs::path(options.truth_dir) / "poses.tum", truth_lines);
 	}
 	const auto s = pipeline.stats();
 	const double elapsed = static_cast<double>(monotonic_ns() - start_ns) * 1e-9;

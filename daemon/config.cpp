@@ -303,10 +303,10 @@ const std::vector<Option> &options()
 			"dc1394", "frame_rate", "frame rate; 0 = the camera's",
 			[](DaemonConfig &c) -> double & { return c.source.dc1394.frame_rate; }, 0, 240));
 		// [sim]
-		o.push_back(text("sim", "scene",
-				 "default | static_near | static_far | moving_one | moving_many | toward",
-				 [](DaemonConfig &c) -> std::string & { return c.source.sim.scene; },
-				 {"default", "static_near", "static_far", "moving_one", "moving_many", "toward"}));
+		o.push_back(text(
+			"sim", "scene", "default | static_near | static_far | moving_one | moving_many | toward | walk",
+			[](DaemonConfig &c) -> std::string & { return c.source.sim.scene; },
+			{"default", "static_near", "static_far", "moving_one", "moving_many", "toward", "walk"}));
 		o.push_back(number(
 			"sim", "seed", "random seed: same seed, same frames",
 			[](DaemonConfig &c) -> uint64_t & { return c.source.sim.seed; }, 0, 4e9));
@@ -418,6 +418,8 @@ const std::vector<Option> &options()
 			"matching", "search_radius_px",
 			"guided matching: candidates within this of the predicted position; 0 = brute force",
 			[](DaemonConfig &c) -> float & { return c.motion.matching.search_radius_px; }, 0, 10000));
+		o.push_back(boolean("matching", "subpixel", "refine matches to a fraction of a pixel (Lucas-Kanade)",
+				    [](DaemonConfig &c) -> bool & { return c.motion.matching.subpixel; }));
 		// [classifier]
 		o.push_back(number(
 			"classifier", "ransac_threshold_px", "RANSAC inlier distance, pixels",
@@ -469,6 +471,82 @@ const std::vector<Option> &options()
 		o.push_back(number(
 			"classifier", "min_matches", "fewer matches: no homography, all uncertain",
 			[](DaemonConfig &c) -> int & { return c.motion.classifier.min_matches; }, 4, 100000));
+		{
+			Option method{"classifier", "label_method",
+				      "with depth: combined | geometric (seed 001) | seed000 (homography only)",
+				      nullptr, nullptr};
+			method.set = [](const Value &v, DaemonConfig &c) {
+				const std::string name = v.is_string() ? std::string(v.as_string()) : std::string();
+				if (name == "combined")
+					c.motion.label_method = vision::LabelMethod::Combined;
+				else if (name == "geometric")
+					c.motion.label_method = vision::LabelMethod::Geometric;
+				else if (name == "seed000")
+					c.motion.label_method = vision::LabelMethod::Seed000;
+				else
+					throw std::invalid_argument("must be one of combined, geometric, seed000");
+			};
+			method.show = [](const DaemonConfig &c) {
+				switch (c.motion.label_method) {
+				case vision::LabelMethod::Geometric:
+					return std::string("\"geometric\"");
+				case vision::LabelMethod::Seed000:
+					return std::string("\"seed000\"");
+				case vision::LabelMethod::Combined:
+					break;
+				}
+				return std::string("\"combined\"");
+			};
+			o.push_back(std::move(method));
+		}
+		// [stereo]: sparse stereo on rectified pairs (core/vision/stereo.hpp)
+		o.push_back(boolean("stereo", "enabled", "match the right eye for depth when the source is calibrated",
+				    [](DaemonConfig &c) -> bool & { return c.motion.stereo.enabled; }));
+		o.push_back(number(
+			"stereo", "max_row_diff_px",
+			"epipolar constraint: rows may differ this much (per pyramid level)",
+			[](DaemonConfig &c) -> double & { return c.motion.stereo.max_row_diff_px; }, 0, 16));
+		o.push_back(number(
+			"stereo", "min_disparity_px", "smallest disparity measured (farthest depth f b / d)",
+			[](DaemonConfig &c) -> double & { return c.motion.stereo.min_disparity_px; }, 0.1, 1000));
+		o.push_back(number(
+			"stereo", "max_disparity_px", "largest disparity searched (nearest depth)",
+			[](DaemonConfig &c) -> double & { return c.motion.stereo.max_disparity_px; }, 1, 4096));
+		o.push_back(number(
+			"stereo", "max_distance", "descriptor distance limit (Hamming bits for ORB)",
+			[](DaemonConfig &c) -> int & { return c.motion.stereo.max_distance; }, 1, 512));
+		o.push_back(number(
+			"stereo", "ratio", "Lowe's ratio among the candidates in the epipolar band",
+			[](DaemonConfig &c) -> float & { return c.motion.stereo.ratio; }, 0.1, 1));
+		o.push_back(number(
+			"stereo", "window_radius_px", "sub-pixel refinement window half-size",
+			[](DaemonConfig &c) -> int & { return c.motion.stereo.window_radius_px; }, 1, 15));
+		o.push_back(number(
+			"stereo", "disparity_sigma_px", "disparity noise after refinement (depth uncertainty)",
+			[](DaemonConfig &c) -> double & { return c.motion.stereo.disparity_sigma_px; }, 0.01, 10));
+		// [ego]: the camera's motion from stereo (core/vision/ego.hpp)
+		o.push_back(boolean("ego", "enabled", "estimate the metric pose when the source has depth",
+				    [](DaemonConfig &c) -> bool & { return c.motion.ego.enabled; }));
+		o.push_back(number(
+			"ego", "ransac_threshold_px", "PnP RANSAC inlier distance",
+			[](DaemonConfig &c) -> double & { return c.motion.ego.ransac_threshold_px; }, 0.1, 50));
+		o.push_back(number(
+			"ego", "min_inliers", "fewer: the pose is not trusted (ego.valid false)",
+			[](DaemonConfig &c) -> int & { return c.motion.ego.min_inliers; }, 6, 100000));
+		o.push_back(number(
+			"ego", "pixel_sigma_px", "feature position noise of the geometric test",
+			[](DaemonConfig &c) -> double & { return c.motion.ego.pixel_sigma_px; }, 0.01, 20));
+		o.push_back(number(
+			"ego", "chi2_quantile", "the geometric test's confidence (false alarms: 1 - this)",
+			[](DaemonConfig &c) -> double & { return c.motion.ego.chi2_quantile; }, 0.5, 0.999999));
+		o.push_back(number(
+			"ego", "confirm_frames", "frames in a row a point must fail the test to be dynamic",
+			[](DaemonConfig &c) -> int & { return c.motion.ego.confirm_frames; }, 1, 100));
+		o.push_back(boolean("ego", "depth_check", "test the depth measured at frame n (seed 001 eq. 4)",
+				    [](DaemonConfig &c) -> bool & { return c.motion.ego.depth_check; }));
+		o.push_back(boolean("ego", "along_line",
+				    "test the position along the epipolar line too (beyond seed 001)",
+				    [](DaemonConfig &c) -> bool & { return c.motion.ego.along_line; }));
 		// [memory]: beyond the seed (core/vision/temporal.hpp)
 		o.push_back(number(
 			"memory", "window_s", "time constant of each point's remembered own motion; 0 = seed only",

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "core/frame.hpp"
+#include "core/geometry/rig.hpp"
 
 namespace stereod::drivers {
 
@@ -108,10 +109,7 @@ struct SourceConfig {
 };
 
 /// Rectified pinhole stereo calibration, where the source knows it (sim, KITTI's calib files).
-struct StereoCalibration {
-	double fx = 0, fy = 0, cx = 0, cy = 0; ///< left camera, pixels
-	double baseline_m = 0;		       ///< right camera's offset along the left camera's x axis
-};
+using StereoCalibration = geometry::StereoRig;
 
 struct SourceInfo {
 	std::string name;	 ///< driver name, e.g. "sim", "kitti"

@@ -1,5 +1,7 @@
 #include "tools/evaluation.hpp"
 
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
 
 #include <opencv2/imgproc.hpp>
@@ -142,6 +144,54 @@ std::string format_score_row(const std::string &name, const LabelScore &s)
 		s.precision(), s.recall(), s.f1(), s.static_error_rate(), s.uncertain_rate(),
 		100.0 * s.mean_coverage());
 	return line;
+}
+
+DepthScore &DepthScore::operator+=(const DepthScore &other)
+{
+	relative_errors.insert(relative_errors.end(), other.relative_errors.begin(), other.relative_errors.end());
+	points += other.points;
+	with_depth += other.with_depth;
+	return *this;
+}
+
+double DepthScore::median() const
+{
+	if (relative_errors.empty())
+		return 0;
+	std::vector<double> sorted = relative_errors;
+	const auto mid = sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2);
+	std::nth_element(sorted.begin(), mid, sorted.end());
+	return *mid;
+}
+
+double DepthScore::fraction_within(double relative) const
+{
+	if (relative_errors.empty())
+		return 0;
+	const auto n =
+		std::count_if(relative_errors.begin(), relative_errors.end(), [&](double e) { return e <= relative; });
+	return static_cast<double>(n) / static_cast<double>(relative_errors.size());
+}
+
+DepthScore score_depth(const FrameResult &result, const cv::Mat &depth_mm)
+{
+	DepthScore score;
+	for (const auto &point : result.points) {
+		++score.points;
+		if (!point.xyz_m)
+			continue;
+		++score.with_depth;
+		const int x = static_cast<int>(std::lround(point.u));
+		const int y = static_cast<int>(std::lround(point.v));
+		if (x < 0 || y < 0 || x >= depth_mm.cols || y >= depth_mm.rows)
+			continue;
+		const uint16_t truth = depth_mm.at<uint16_t>(y, x);
+		if (truth == 0)
+			continue;
+		const double z_true = truth * 1e-3;
+		score.relative_errors.push_back(std::abs(static_cast<double>((*point.xyz_m)[2]) - z_true) / z_true);
+	}
+	return score;
 }
 
 } // namespace stereod::tools

@@ -4,6 +4,7 @@
 #include <cstdint>
 #include <map>
 #include <string>
+#include <vector>
 
 #include <opencv2/core.hpp>
 
@@ -45,6 +46,17 @@ struct MoverCounts {
 	[[nodiscard]] double recall() const;
 };
 void count_per_mover(const FrameResult &result, const cv::Mat &mask, std::map<int, MoverCounts> &counts);
+
+/// Measured depth (points' xyz_m) against the true depth image (16-bit millimetres, 0 = unknown).
+struct DepthScore {
+	std::vector<double> relative_errors; ///< |z - z_true| / z_true per point with both
+	uint64_t points = 0;		     ///< points in the frames scored
+	uint64_t with_depth = 0;	     ///< of those, with xyz_m
+	DepthScore &operator+=(const DepthScore &other);
+	[[nodiscard]] double median() const;
+	[[nodiscard]] double fraction_within(double relative) const;
+};
+DepthScore score_depth(const FrameResult &result, const cv::Mat &depth_mm);
 
 /// A table row: "name frames points P R F1 static-error uncertain coverage".
 std::string format_score_row(const std::string &name, const LabelScore &score);

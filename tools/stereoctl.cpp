@@ -213,6 +213,7 @@ int eval(const std::string &results_path, const std::string &truth_dir, const st
 {
 	const auto results = tools::read_results(results_path);
 	tools::LabelScore all, covered;
+	tools::DepthScore depth;
 	std::map<int, tools::MoverCounts> movers;
 	uint64_t missing = 0;
 	std::ofstream csv;
@@ -229,6 +230,10 @@ int eval(const std::string &results_path, const std::string &truth_dir, const st
 			continue;
 		}
 		const auto score = tools::score_frame(result, mask, border_px);
+		char depth_name[32];
+		std::snprintf(depth_name, sizeof(depth_name), "%06llu.png", static_cast<unsigned long long>(seq));
+		if (const fs::path depth_file = fs::path(truth_dir) / "depth" / depth_name; fs::exists(depth_file))
+			depth += tools::score_depth(result, cv::imread(depth_file.string(), cv::IMREAD_ANYDEPTH));
 		if (per_mover)
 			tools::count_per_mover(result, mask, movers);
 		all += score;
@@ -261,7 +266,14 @@ int eval(const std::string &results_path, const std::string &truth_dir, const st
 					    {"all", row(all)},
 					    {"covered", row(covered)},
 					    {"min_coverage", min_coverage},
-					    {"frames_without_mask", missing}}
+					    {"frames_without_mask", missing},
+					    {"depth",
+					     {{"points", depth.points},
+					      {"with_depth", depth.with_depth},
+					      {"scored", depth.relative_errors.size()},
+					      {"median_relative_error", depth.median()},
+					      {"within_1_percent", depth.fraction_within(0.01)},
+					      {"within_5_percent", depth.fraction_within(0.05)}}}}
 				     .dump()
 			  << "\n";
 		return 0;
@@ -278,6 +290,15 @@ int eval(const std::string &results_path, const std::string &truth_dir, const st
 			std::cout << "| " << id << " | " << c.dynamic << " | " << c.static_ << " | " << c.uncertain
 				  << " | " << std::fixed << std::setprecision(3) << c.recall() << " |\n";
 	}
+	if (!depth.relative_errors.empty())
+		std::cout << "\ndepth: " << depth.with_depth << " of " << depth.points << " points carry xyz_m ("
+			  << std::fixed << std::setprecision(1)
+			  << 100.0 * static_cast<double>(depth.with_depth) /
+				     static_cast<double>(std::max<uint64_t>(depth.points, 1))
+			  << "%); against the true depth: median relative error " << std::setprecision(3)
+			  << 100 * depth.median() << "%, within 1%: " << std::setprecision(1)
+			  << 100 * depth.fraction_within(0.01) << "%, within 5%: " << 100 * depth.fraction_within(0.05)
+			  << "%\n";
 	if (missing)
 		std::cerr << "stereoctl eval: " << missing << " frames had no mask\n";
 	return 0;
@@ -509,8 +530,14 @@ int main(int argc, char **argv)
 	double eval_coverage = 0.02;
 	bool eval_json = false;
 	eval_cmd->add_option("-r,--results", eval_results, "NDJSON written by stereod process")->required();
-	eval_cmd->add_option("-t,--truth", eval_truth, "folder with masks (stereod process --truth-dir, or <seq>.png)")
-		->required();
+	eval_cmd->add_option("-t,--truth", eval_truth, "folder with masks (stereod process --truth-dir, or <seq>.png)");
+	tools::TrajectoryEvalOptions trajectory;
+	eval_cmd->add_option("--poses", trajectory.poses,
+			     "score the trajectory: TUM or KITTI poses file, or a --truth-dir folder");
+	eval_cmd->add_option("--delta", trajectory.delta, "RPE over this many frames")->capture_default_str();
+	eval_cmd->add_option("--window", trajectory.window, "drift over windows of this many frames")
+		->capture_default_str();
+	eval_cmd->add_option("--write-tum", trajectory.write_estimate, "also write the estimated trajectory (TUM)");
 	eval_cmd->add_option("--name", eval_name, "row name in the table");
 	eval_cmd->add_option("--border", eval_border, "ignore points this close to a mover's outline, pixels");
 	eval_cmd->add_option("--min-coverage", eval_coverage, "second row: frames whose movers cover at least this");
@@ -557,9 +584,23 @@ int main(int argc, char **argv)
 			return record(record_opts, record_out, record_frames, record_seconds, record_sync);
 		if (*info_cmd)
 			return info(info_path);
-		if (*eval_cmd)
-			return eval(eval_results, eval_truth, eval_name, eval_border, eval_coverage, eval_csv,
-				    eval_json, eval_per_mover);
+		if (*eval_cmd) {
+			if (eval_truth.empty() && trajectory.poses.empty()) {
+				std::cerr << "stereoctl eval: give --truth (labels), --poses (trajectory), or both\n";
+				return 2;
+			}
+			int rc = 0;
+			if (!eval_truth.empty())
+				rc = eval(eval_results, eval_truth, eval_name, eval_border, eval_coverage, eval_csv,
+					  eval_json, eval_per_mover);
+			if (rc == 0 && !trajectory.poses.empty()) {
+				trajectory.results = eval_results;
+				trajectory.name = eval_name;
+				trajectory.json = eval_json;
+				rc = tools::eval_trajectory(trajectory);
+			}
+			return rc;
+		}
 		if (*render_cmd)
 			return render(render_opts, render_results, render_truth, render_out, render_video, render_sheet,
 				      render_sheet_frames, render_every, render_arrows);

@@ -1,5 +1,6 @@
 #pragma once
 // stereoctl subcommands that live in their own files (one file per subcommand, as git's builtin/).
+#include <cstddef>
 #include <string>
 
 namespace CLI {
@@ -12,5 +13,18 @@ namespace stereod::tools {
 void add_devices_command(CLI::App &app);
 /// `stereoctl export`: a recording to PNG pairs (the `folder` layout) or a KITTI raw-data drive folder.
 void add_export_command(CLI::App &app);
+
+/// `stereoctl eval --poses`: the estimated trajectory against TUM or KITTI ground truth (ATE, RPE, drift).
+struct TrajectoryEvalOptions {
+	std::string results; ///< NDJSON from stereod process
+	std::string poses;   ///< TUM file, KITTI poses file, or a --truth-dir folder (its poses.tum)
+	std::string name = "run";
+	size_t delta = 1;	///< RPE over this many frames
+	size_t window = 10;	///< drift windows, frames
+	double max_dt_s = 0.02; ///< TUM association tolerance
+	bool json = false;
+	std::string write_estimate; ///< also write the estimate as TUM here
+};
+int eval_trajectory(const TrajectoryEvalOptions &options);
 
 } // namespace stereod::tools

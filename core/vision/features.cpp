@@ -65,10 +65,13 @@ std::vector<cv::KeyPoint> bucket_keypoints(std::vector<cv::KeyPoint> keypoints, 
 	return kept;
 }
 
-FrameFeatures extract_features(const cv::Mat &image, const FeatureParams &params, int colour_radius)
+FrameFeatures extract_features(const cv::Mat &image, const FeatureParams &params, int colour_radius,
+			       const cv::Mat *grey_given)
 {
 	cv::Mat grey;
-	if (image.channels() == 3)
+	if (grey_given != nullptr)
+		grey = *grey_given;
+	else if (image.channels() == 3)
 		cv::cvtColor(image, grey, cv::COLOR_BGR2GRAY);
 	else
 		grey = image;

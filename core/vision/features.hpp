@@ -1,11 +1,13 @@
 #pragma once
 // Feature extraction: keypoints, descriptors and the colour under each keypoint, computed once per frame
 // and reused as "frame n-1" on the next step.
+#include <optional>
 #include <string_view>
 #include <vector>
 
 #include <opencv2/core.hpp>
 
+#include "core/result.hpp"
 #include "core/vision/surf.hpp"
 
 namespace stereod::vision {
@@ -29,6 +31,12 @@ struct FrameFeatures {
 	cv::Mat descriptors;		  ///< one row per keypoint
 	int norm_type = cv::NORM_HAMMING; ///< how descriptors compare
 	std::vector<cv::Vec3f> colours;	  ///< mean B,G,R around each keypoint
+	/// Per keypoint: the left-camera 3D point (metres) from stereo or a depth image, NaN where unmeasured;
+	/// empty when the frame has no depth at all (monocular, or no calibration).
+	std::vector<cv::Vec3f> xyz;
+	std::optional<StereoSummary> stereo; ///< how the stereo matching went, when it ran
+	/// The left image in grey (owned, not a pool buffer), for sub-pixel refinement of the temporal matches.
+	cv::Mat grey;
 };
 
 /// Mean colour (B,G,R; grey images repeat the one channel) of the patch around `at`, clamped to the image.
@@ -39,6 +47,8 @@ std::vector<cv::KeyPoint> bucket_keypoints(std::vector<cv::KeyPoint> keypoints, 
 					   int grid_rows, int max_total);
 
 /// Detects, buckets and describes; `image` is BGR or grey. Colours are patch means of radius colour_radius.
-FrameFeatures extract_features(const cv::Mat &image, const FeatureParams &params, int colour_radius);
+/// `grey`, when given, is `image` already converted (it saves the conversion when the caller has it).
+FrameFeatures extract_features(const cv::Mat &image, const FeatureParams &params, int colour_radius,
+			       const cv::Mat *grey = nullptr);
 
 } // namespace stereod::vision

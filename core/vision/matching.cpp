@@ -6,6 +6,8 @@
 #include <cstring>
 #include <limits>
 
+#include <opencv2/video/tracking.hpp>
+
 #include <opencv2/features2d.hpp>
 
 namespace stereod::vision {
@@ -264,6 +266,32 @@ std::vector<Match> match_features(const FrameFeatures &prev, const FrameFeatures
 	if (binary_descriptors(prev, cur))
 		return match_binary(prev.descriptors, cur.descriptors, params);
 	return match_float(prev.descriptors, cur.descriptors, params, cur.norm_type);
+}
+
+int refine_matches(const cv::Mat &prev_grey, const cv::Mat &cur_grey, std::span<const cv::Point2f> prev_pts,
+		   std::span<cv::Point2f> cur_pts, const MatchParams &params)
+{
+	if (prev_pts.empty() || prev_pts.size() != cur_pts.size() || prev_grey.empty() || cur_grey.empty() ||
+	    prev_grey.size() != cur_grey.size())
+		return 0;
+	const std::vector<cv::Point2f> from(prev_pts.begin(), prev_pts.end());
+	std::vector<cv::Point2f> to(cur_pts.begin(), cur_pts.end());
+	std::vector<uchar> status;
+	std::vector<float> error;
+	const cv::Size window(params.subpixel_window_px, params.subpixel_window_px);
+	cv::calcOpticalFlowPyrLK(prev_grey, cur_grey, from, to, status, error, window, 1,
+				 cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 20, 0.01),
+				 cv::OPTFLOW_USE_INITIAL_FLOW);
+	int refined = 0;
+	const float max2 = params.subpixel_max_shift_px * params.subpixel_max_shift_px;
+	for (size_t i = 0; i < to.size(); ++i) {
+		const cv::Point2f shift = to[i] - cur_pts[i];
+		if (status[i] == 0 || !std::isfinite(to[i].x) || !std::isfinite(to[i].y) || shift.dot(shift) > max2)
+			continue;
+		cur_pts[i] = to[i];
+		++refined;
+	}
+	return refined;
 }
 
 } // namespace stereod::vision

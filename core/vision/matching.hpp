@@ -17,6 +17,12 @@ struct MatchParams {
 	/// It bounds how far a mover can move against the scene in one frame interval (64 px at 30 fps is
 	/// about 1.9 m/s across the view at 1 m with a 920 px focal length). 0: always brute force.
 	float search_radius_px = 64;
+	/// Refine each match's position in frame n to a fraction of a pixel by Lucas-Kanade from its position in
+	/// frame n-1: keypoints from coarse pyramid levels are located to 1.2^level pixels only, which a metric
+	/// pose turns into centimetres of error (docs/geometry.md).
+	bool subpixel = true;
+	int subpixel_window_px = 11;	 ///< LK window side
+	float subpixel_max_shift_px = 2; ///< a refinement moving the point farther is refused (keeps the keypoint)
 };
 
 struct Match {
@@ -33,5 +39,11 @@ std::vector<Match> match_features(const FrameFeatures &prev, const FrameFeatures
 /// non-finite one matches nothing). The cross check runs over the same candidate pairs.
 std::vector<Match> match_features_guided(const FrameFeatures &prev, const FrameFeatures &cur,
 					 std::span<const cv::Point2f> predicted, const MatchParams &params);
+
+/// Sub-pixel positions in `cur_grey` of the points `prev_pts` of `prev_grey`, starting from `cur_pts`
+/// (one pyramidal Lucas-Kanade step, seeded): a point LK loses, or moves farther than max_shift_px, keeps its
+/// start. Returns how many were refined.
+int refine_matches(const cv::Mat &prev_grey, const cv::Mat &cur_grey, std::span<const cv::Point2f> prev_pts,
+		   std::span<cv::Point2f> cur_pts, const MatchParams &params);
 
 } // namespace stereod::vision

@@ -1,23 +1,132 @@
 #include "core/vision/motion_stages.hpp"
 
+#include <cmath>
+#include <limits>
+
+#include <opencv2/imgproc.hpp>
+
 #include "core/stage_timer.hpp"
 
 namespace stereod::vision {
 
+namespace {
+
+constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+
+cv::Mat grey_of(const cv::Mat &image)
+{
+	if (image.channels() == 1)
+		return image;
+	cv::Mat grey;
+	cv::cvtColor(image, grey, cv::COLOR_BGR2GRAY);
+	return grey;
+}
+
+/// Each keypoint's 3D point from a depth image (CV_32FC1, metres, 0 = unknown) registered to the left image.
+std::vector<cv::Vec3f> points_from_depth(const std::vector<cv::KeyPoint> &keypoints, const cv::Mat &depth,
+					 const geometry::StereoRig &rig)
+{
+	std::vector<cv::Vec3f> xyz(keypoints.size(), cv::Vec3f(kNaN, kNaN, kNaN));
+	for (size_t i = 0; i < keypoints.size(); ++i) {
+		const int x = static_cast<int>(std::lround(keypoints[i].pt.x));
+		const int y = static_cast<int>(std::lround(keypoints[i].pt.y));
+		if (x < 0 || y < 0 || x >= depth.cols || y >= depth.rows)
+			continue;
+		const float z = depth.at<float>(y, x);
+		if (!(z > 0) || !std::isfinite(z))
+			continue;
+		const double u = keypoints[i].pt.x, v = keypoints[i].pt.y;
+		xyz[i] = cv::Vec3f(static_cast<float>((u - rig.cx) * z / rig.fx),
+				   static_cast<float>((v - rig.cy) * z / rig.fy), z);
+	}
+	return xyz;
+}
+
+/// The label a point gets from seed 000's label, the geometric test and whether its two ends look alike.
+PointLabel combine(LabelMethod method, PointLabel seed, const GeometricTest &test, bool has_prev_depth,
+		   bool texture_agrees)
+{
+	if (method == LabelMethod::Seed000 || test.dof == 0)
+		return method == LabelMethod::Geometric ? PointLabel::Uncertain : seed;
+	if (!texture_agrees)
+		return PointLabel::Uncertain; // seed 000's mismatch test: the two ends are not the same surface
+	if (method == LabelMethod::Geometric || has_prev_depth)
+		return test.moving ? PointLabel::Dynamic : PointLabel::Static;
+	// Combined, no depth: eq. 1 alone cannot see motion along the epipolar line, and the homography cannot
+	// explain parallax; only where both agree is the label kept.
+	if (seed == PointLabel::Dynamic && test.moving)
+		return PointLabel::Dynamic;
+	if (seed == PointLabel::Static && !test.moving)
+		return PointLabel::Static;
+	return PointLabel::Uncertain;
+}
+
+void fill_pose(EgoMotion &ego, const geometry::Pose *prev_from_curr, const geometry::Pose &world_from_curr)
+{
+	if (prev_from_curr != nullptr)
+		ego.t_prev_curr = prev_from_curr->matrix();
+	ego.t_world_curr = world_from_curr.matrix();
+}
+
+} // namespace
+
 FrameFeatures extract_stage(const StereoFrame &frame, const MotionParams &params, std::vector<StageTime> &timing)
 {
-	StageTimer timer(timing, "extract");
-	return extract_features(frame.left, params.features, params.classifier.colour_radius);
+	FrameFeatures features;
+	cv::Mat grey;
+	{
+		StageTimer timer(timing, "extract");
+		grey = grey_of(frame.left);
+		features = extract_features(frame.left, params.features, params.classifier.colour_radius, &grey);
+		if (params.matching.subpixel)
+			// A grey frame's image is a pool buffer that the next capture overwrites: keep a copy.
+			features.grey = grey.data == frame.left.data ? grey.clone() : grey;
+	}
+	if (!params.rig)
+		return features;
+	// A source with both eyes is measured by stereo even when it also has a depth image (the sim's depth
+	// is its ground truth); a depth image alone (RGB-D) gives the points directly.
+	const bool stereo = !frame.right.empty() && params.stereo.enabled;
+	if (!stereo && !frame.depth.empty()) {
+		StageTimer timer(timing, "depth");
+		features.xyz = points_from_depth(features.keypoints, frame.depth, *params.rig);
+		return features;
+	}
+	if (!stereo)
+		return features;
+	StageTimer timer(timing, "stereo");
+	const cv::Mat right_grey = grey_of(frame.right);
+	const FrameFeatures right =
+		extract_features(frame.right, params.features, params.classifier.colour_radius, &right_grey);
+	const double scale_step = params.features.detector == Detector::Orb ? params.features.orb_scale : 1.4;
+	StereoDepth depth = match_stereo(features, right, grey, right_grey, *params.rig, params.stereo, scale_step);
+	features.xyz = std::move(depth.xyz);
+	features.stereo = StereoSummary{static_cast<int>(features.keypoints.size()), depth.matched, depth.candidates,
+					depth.outside_band, median_of(std::move(depth.row_differences))};
+	return features;
 }
 
 TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, const FrameFeatures &cur,
 		    const StereoFrame &frame, const MotionParams &params, FrameResult &result)
 {
+	result.stereo = cur.stereo;
+	const bool metric = params.rig.has_value() && params.ego.enabled && !cur.xyz.empty();
 	FollowInput follow;
 	follow.cur_keypoints = cur.keypoints.size();
 	follow.t_ns = frame.device_ns;
-	if (prev == nullptr)
-		return follow_tracks(nullptr, follow, params.classifier, params.temporal);
+	if (prev == nullptr || (metric && (prev_tracks == nullptr || !prev_tracks->world_from_camera))) {
+		// The first frame (or the memory was lost): with depth, this camera is the world's origin.
+		TrackSet tracks = follow_tracks(nullptr, follow, params.classifier, params.temporal);
+		if (metric) {
+			tracks.world_from_camera = geometry::Pose{};
+			EgoMotion ego;
+			ego.valid = false;
+			ego.reason = "first frame: the world's origin";
+			fill_pose(ego, nullptr, *tracks.world_from_camera);
+			result.ego = ego;
+		}
+		return tracks;
+	}
 	std::vector<Match> matches;
 	{
 		StageTimer timer(result.timing, "match");
@@ -27,17 +136,29 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 		matches = predicted ? match_features_guided(*prev, cur, *predicted, params.matching)
 				    : match_features(*prev, cur, params.matching);
 	}
-	StageTimer timer(result.timing, "classify");
+	const size_t n = matches.size();
 	std::vector<PointPair> pairs;
-	pairs.reserve(matches.size());
+	pairs.reserve(n);
 	for (const auto &m : matches) {
 		const auto p = static_cast<size_t>(m.prev);
 		const auto c = static_cast<size_t>(m.cur);
 		pairs.push_back({prev->keypoints[p].pt, cur.keypoints[c].pt, prev->colours[p], cur.colours[c]});
 	}
-	std::vector<uint8_t> known_moving(matches.size(), 0);
+	if (params.matching.subpixel && !prev->grey.empty() && !cur.grey.empty()) {
+		StageTimer timer(result.timing, "subpixel");
+		std::vector<cv::Point2f> from(n), to(n);
+		for (size_t i = 0; i < n; ++i) {
+			from[i] = pairs[i].prev;
+			to[i] = pairs[i].cur;
+		}
+		refine_matches(prev->grey, cur.grey, from, to, params.matching);
+		for (size_t i = 0; i < n; ++i)
+			pairs[i].cur = to[i];
+	}
+	StageTimer timer(result.timing, "classify");
+	std::vector<uint8_t> known_moving(n, 0);
 	if (prev_tracks != nullptr) {
-		for (size_t i = 0; i < matches.size(); ++i) {
+		for (size_t i = 0; i < n; ++i) {
 			const auto p = static_cast<size_t>(matches[i].prev);
 			known_moving[i] =
 				p < prev_tracks->by_keypoint.size() &&
@@ -45,31 +166,131 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 		}
 	}
 	Classification classification = classify(pairs, frame.left, params.classifier, known_moving);
+
+	// Stereo: the camera's metric motion from the points that may vote, then seed 001's test per point.
+	std::optional<PoseEstimate> pose;
+	std::vector<cv::Point2f> predicted;
+	std::vector<uint8_t> failed; // per match: the geometric test failed this frame
+	const bool prev_has_depth = metric && prev->xyz.size() == prev->keypoints.size();
+	if (prev_has_depth) {
+		StageTimer pose_timer(result.timing, "pose");
+		std::vector<cv::Vec3f> prev_xyz(n);
+		std::vector<cv::Point2f> cur_px(n);
+		std::vector<uint8_t> votes(n);
+		for (size_t i = 0; i < n; ++i) {
+			prev_xyz[i] = prev->xyz[static_cast<size_t>(matches[i].prev)];
+			cur_px[i] = pairs[i].cur;
+			const auto p = static_cast<size_t>(matches[i].prev);
+			const bool was_dynamic = prev_tracks != nullptr &&
+						 p < prev_tracks->dynamic_by_keypoint.size() &&
+						 prev_tracks->dynamic_by_keypoint[p] != 0;
+			votes[i] = known_moving[i] == 0 && !was_dynamic;
+		}
+		std::optional<MotionPrior> prior;
+		if (prev_tracks != nullptr && prev_tracks->last_motion && prev_tracks->interval_ns > 0 &&
+		    frame.device_ns > prev_tracks->t_ns)
+			prior = MotionPrior::constant_velocity(
+				*prev_tracks->last_motion, static_cast<double>(prev_tracks->interval_ns) * 1e-9,
+				static_cast<double>(frame.device_ns - prev_tracks->t_ns) * 1e-9, params.ego);
+		pose = estimate_pose(prev_xyz, cur_px, votes, *params.rig, params.ego, prior ? &*prior : nullptr);
+		if (pose->valid) {
+			const GeometricContext context = GeometricContext::make(
+				*params.rig, pose->curr_from_prev, params.stereo.disparity_sigma_px, params.ego);
+			predicted.assign(n, cv::Point2f(kNaN, kNaN));
+			const bool have_texture = classification.texture_agrees.size() == n;
+			failed.assign(n, 0);
+			for (size_t i = 0; i < n; ++i) {
+				const float cur_depth = cur.xyz[static_cast<size_t>(matches[i].cur)][2];
+				const GeometricTest test =
+					geometric_test(context, pairs[i].prev, prev_xyz[i], pairs[i].cur, cur_depth);
+				predicted[i] = test.predicted;
+				const bool has_prev_depth = std::isfinite(prev_xyz[i][2]);
+				PointLabel label =
+					combine(params.label_method, classification.labels[i], test, has_prev_depth,
+						!have_texture || classification.texture_agrees[i] != 0);
+				// Seed 000's double texture check (eqs. 6-7) with the pose's prediction: when what the
+				// image now shows where a static point would be looks like the point, the match more
+				// likely jumped to a look-alike (a repeated window) than the point moved.
+				if (label == PointLabel::Dynamic && std::isfinite(test.predicted.x) &&
+				    test.predicted.x >= 0 && test.predicted.y >= 0 &&
+				    test.predicted.x < static_cast<float>(frame.left.cols) &&
+				    test.predicted.y < static_cast<float>(frame.left.rows) &&
+				    texture_distance_near(pairs[i].prev_colour, frame.left, test.predicted,
+							  params.classifier) <= params.classifier.texture_threshold)
+					label = PointLabel::Uncertain;
+				if (test.moving)
+					failed[i] = 1;
+				if (label == PointLabel::Dynamic && params.ego.confirm_frames > 1) {
+					const auto p = static_cast<size_t>(matches[i].prev);
+					const bool failed_before = prev_tracks != nullptr &&
+								   p < prev_tracks->dynamic_by_keypoint.size() &&
+								   prev_tracks->dynamic_by_keypoint[p] != 0;
+					if (!failed_before)
+						label = PointLabel::Uncertain; // not yet confirmed
+				}
+				classification.labels[i] = label;
+			}
+		}
+	}
+
 	follow.matches = matches;
 	follow.pairs = pairs;
 	follow.homography = classification.homography ? &*classification.homography : nullptr;
 	follow.texture_agrees = classification.texture_agrees;
+	// With a metric pose the memory sums motion against the pose's prediction, which explains parallax.
+	if (params.label_method != LabelMethod::Seed000)
+		follow.predicted = predicted;
 	TrackSet tracks = follow_tracks(prev_tracks, follow, params.classifier, params.temporal);
 	promote_remembered_movers(classification.labels, matches, tracks, params.classifier, params.temporal);
-	result.points.reserve(pairs.size());
-	for (size_t i = 0; i < pairs.size(); ++i) {
+	tracks.dynamic_by_keypoint.assign(cur.keypoints.size(), 0);
+	for (size_t i = 0; i < n; ++i)
+		if (classification.labels[i] == PointLabel::Dynamic || (i < failed.size() && failed[i] != 0))
+			tracks.dynamic_by_keypoint[static_cast<size_t>(matches[i].cur)] = 1;
+	result.points.reserve(n);
+	for (size_t i = 0; i < n; ++i) {
 		LabelledPoint point;
 		point.u = pairs[i].cur.x;
 		point.v = pairs[i].cur.y;
 		point.prev_u = pairs[i].prev.x;
 		point.prev_v = pairs[i].prev.y;
 		point.label = classification.labels[i];
-		point.track = tracks.by_keypoint[static_cast<size_t>(matches[i].cur)].id;
+		const auto c = static_cast<size_t>(matches[i].cur);
+		point.track = tracks.by_keypoint[c].id;
+		if (c < cur.xyz.size() && std::isfinite(cur.xyz[c][2]))
+			point.xyz_m = std::array<float, 3>{cur.xyz[c][0], cur.xyz[c][1], cur.xyz[c][2]};
 		result.points.push_back(point);
 	}
+
+	EgoMotion ego;
 	if (classification.homography) {
-		EgoMotion ego;
+		std::array<double, 9> h{};
 		for (int r = 0; r < 3; ++r)
 			for (int c = 0; c < 3; ++c)
-				ego.homography[static_cast<size_t>(r * 3 + c)] = (*classification.homography)(r, c);
+				h[static_cast<size_t>(r * 3 + c)] = (*classification.homography)(r, c);
+		ego.homography = h;
+		ego.homography_inliers = classification.homography_inliers;
 		ego.inliers = classification.homography_inliers;
-		result.ego = ego;
 	}
+	if (metric) {
+		const geometry::Pose world_prev = prev_tracks != nullptr && prev_tracks->world_from_camera
+							  ? *prev_tracks->world_from_camera
+							  : geometry::Pose{};
+		ego.valid = pose && pose->valid;
+		if (pose && pose->valid) {
+			const geometry::Pose prev_from_curr = pose->curr_from_prev.inverse();
+			tracks.world_from_camera = world_prev * prev_from_curr;
+			tracks.last_motion = pose->curr_from_prev;
+			ego.inliers = pose->inliers;
+			fill_pose(ego, &prev_from_curr, *tracks.world_from_camera);
+		} else {
+			// No estimate: the camera is taken to stand where it was, and the chain goes on from there.
+			tracks.world_from_camera = world_prev;
+			ego.reason = pose ? pose->reason : "the previous frame has no depth";
+			fill_pose(ego, nullptr, world_prev);
+		}
+	}
+	if (classification.homography || metric)
+		result.ego = ego;
 	return tracks;
 }
 

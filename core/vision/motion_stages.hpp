@@ -1,16 +1,31 @@
 #pragma once
-// The per-frame and per-pair stages the worker pool runs for seed 000's classification.
-//   extract_stage: one frame -> its features (runs for many frames in parallel)
-//   pair_stage:    features and motion memory of n-1, features and image of n -> labelled points, the
-//                  homography and the memory of n (the only stage that must run in frame order)
+// The per-frame and per-pair stages the worker pool runs.
+//   extract_stage: one frame -> its features, and with a calibrated stereo (or depth) source each keypoint's
+//                  3D point (runs for many frames in parallel)
+//   pair_stage:    features and memory of n-1, features and image of n -> labelled points, the camera's
+//                  motion (homography; stereo: the metric pose) and the memory of n (runs in frame order)
+//
+// Labels with depth (docs/geometry.md): `label_method` chooses
+//   seed000    seed 000's homography chain alone (the monocular method)
+//   geometric  seed 001's check with the stereo pose: a point the pose and its depth explain is static, one
+//              they do not is dynamic; a match whose two ends look different (seed 000's texture test) stays
+//              uncertain. Points without depth are judged by eq. 1 alone.
+//   combined   geometric where the point has depth; without depth, seed 000 and eq. 1 must agree
+#include <optional>
+
 #include "core/frame.hpp"
+#include "core/geometry/rig.hpp"
 #include "core/result.hpp"
 #include "core/vision/classifier.hpp"
+#include "core/vision/ego.hpp"
 #include "core/vision/features.hpp"
 #include "core/vision/matching.hpp"
+#include "core/vision/stereo.hpp"
 #include "core/vision/temporal.hpp"
 
 namespace stereod::vision {
+
+enum class LabelMethod : uint8_t { Seed000, Geometric, Combined };
 
 struct MotionParams {
 	bool enabled = true;
@@ -18,15 +33,22 @@ struct MotionParams {
 	MatchParams matching;
 	ClassifierParams classifier;
 	TemporalParams temporal;
+	StereoParams stereo;
+	EgoParams ego;
+	LabelMethod label_method = LabelMethod::Combined;
+	/// The source's rectified calibration; without it there is no depth and no metric pose.
+	std::optional<geometry::StereoRig> rig;
 };
 
-/// Features of the frame's left image; appends its time as "extract".
+/// Features of the frame's left image and, with a calibrated stereo or depth source, their 3D points;
+/// appends "extract" (and "stereo": the right eye's features and the matching).
 FrameFeatures extract_stage(const StereoFrame &frame, const MotionParams &params, std::vector<StageTime> &timing);
 
-/// Matches n-1 to n, classifies (seed 000) and applies the motion memory; fills result.points and result.ego,
-/// appends "match" and "classify", and returns frame n's memory for the next call. With no previous frame (the
-/// first one, or after a gap the caller chose not to bridge) points and ego stay empty and the memory starts
-/// afresh; `prev_tracks` null with `prev` set means the previous memory was lost, and it starts afresh too.
+/// Matches n-1 to n, classifies and applies the motion memory; fills result.points and result.ego,
+/// appends "match", "classify" (and "pose"), and returns frame n's memory for the next call. With no previous
+/// frame (the first one, or after a gap the caller chose not to bridge) points stay empty and the memory
+/// starts afresh; `prev_tracks` null with `prev` set means the previous memory was lost, and it starts afresh
+/// too. A stereo frame's ego then has the identity pose as the world's origin.
 TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, const FrameFeatures &cur,
 		    const StereoFrame &frame, const MotionParams &params, FrameResult &result);
 

@@ -30,7 +30,9 @@ TrackSet follow_tracks(const TrackSet *prev, const FollowInput &input, const Cla
 		if (p >= prev->by_keypoint.size() || c >= out.by_keypoint.size() || prev_taken[p])
 			continue;
 		const PointPair &pair = input.pairs[i];
-		const cv::Point2f own = pair.cur - project(*input.homography, pair.prev);
+		const bool use_prediction = input.predicted.size() == input.matches.size();
+		const cv::Point2f own =
+			pair.cur - (use_prediction ? input.predicted[i] : project(*input.homography, pair.prev));
 		const double own2 = static_cast<double>(own.dot(own));
 		if (!std::isfinite(own2) || own2 > max_motion2)
 			continue;

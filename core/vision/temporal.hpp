@@ -22,6 +22,7 @@
 
 #include <opencv2/core.hpp>
 
+#include "core/geometry/rig.hpp"
 #include "core/result.hpp"
 #include "core/vision/classifier.hpp"
 #include "core/vision/matching.hpp"
@@ -49,6 +50,14 @@ struct TrackSet {
 	std::optional<cv::Matx33d> homography; ///< the static scene's motion from the frame before to this one
 	std::vector<TrackState> by_keypoint;
 	uint64_t next_id = 1; ///< ids are handed out in frame order, so a replay gives the same ids
+	/// Stereo/RGB-D: this frame's camera in the world (the first frame's camera), carried in frame order
+	/// like the rest of the memory; the last estimated motion, to seed the next frame's.
+	std::optional<geometry::Pose> world_from_camera;
+	std::optional<geometry::Pose> last_motion;
+	/// Per keypoint: labelled dynamic, or failing the geometric test, in this frame. Such a point does not vote
+	/// for the next frame's pose (seed 001: points found dynamic are left out of tracking), so a mover found
+	/// once cannot pull the pose; and a point failing the test again next frame is confirmed dynamic.
+	std::vector<uint8_t> dynamic_by_keypoint;
 };
 
 /// What follow_tracks() needs to know about one match: which keypoints it joins, both ends, and the colours.
@@ -56,6 +65,9 @@ struct FollowInput {
 	std::span<const Match> matches;		 ///< frame n-1 keypoint -> frame n keypoint
 	std::span<const PointPair> pairs;	 ///< the same matches' positions and colours, index for index
 	const cv::Matx33d *homography = nullptr; ///< the static scene's motion n-1 -> n; null: no track is followed
+	/// Per match, where the static scene model puts it in frame n (stereo: the pose and the point's depth);
+	/// when given it replaces the homography, and a NaN prediction leaves that point unfollowed.
+	std::span<const cv::Point2f> predicted;
 	std::span<const uint8_t> texture_agrees; ///< per match: its two ends look alike (Classification)
 	size_t cur_keypoints = 0;		 ///< keypoints in frame n
 	int64_t t_ns = 0;			 ///< frame n's capture time

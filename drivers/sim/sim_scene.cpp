@@ -15,7 +15,7 @@ namespace {
 namespace fs = std::filesystem;
 
 constexpr double kGroundY = 1.4; ///< camera height above the ground (y points down)
-constexpr double kWallZ = 14.0;	 ///< distance of the back wall
+constexpr double kWallZ = 14.0;	 ///< distance of the back wall (the walk's is farther)
 constexpr double kNearZ = 0.05;	 ///< near clipping plane
 
 cv::Matx33d rotation_y(double a)
@@ -98,6 +98,26 @@ cv::Mat mosaic(const std::vector<cv::Mat> &photos, int width, int height)
 		const int take = std::min(w, width - x);
 		resized(cv::Rect(0, 0, take, height)).copyTo(out(cv::Rect(x, 0, take, height)));
 		x += take;
+	}
+	return out;
+}
+
+/// A width x height texture of rows of photographs, each resized to tile_height (about their own height, so
+/// near surfaces keep the photographs' fine detail instead of a blown-up copy); rows start at different
+/// photographs so the pattern does not repeat in columns.
+cv::Mat mosaic_grid(const std::vector<cv::Mat> &photos, int width, int height, int tile_height)
+{
+	cv::Mat out(height, width, CV_8UC3);
+	size_t next = 0;
+	for (int y = 0; y < height; y += tile_height) {
+		const int h = std::min(tile_height, height - y);
+		// Each row starts one photograph later and still uses every photograph.
+		const auto start = static_cast<std::ptrdiff_t>(next % photos.size());
+		std::vector<cv::Mat> rotated(photos.begin() + start, photos.end());
+		rotated.insert(rotated.end(), photos.begin(), photos.begin() + start);
+		const cv::Mat row = mosaic(rotated, width, tile_height);
+		row(cv::Rect(0, 0, width, h)).copyTo(out(cv::Rect(0, y, width, h)));
+		++next;
 	}
 	return out;
 }
@@ -196,6 +216,8 @@ Scene::Scene(const SimConfig &config) : config_(config)
 	intrinsics_.cx = (config.width - 1) / 2.0;
 	intrinsics_.cy = (config.height - 1) / 2.0;
 
+	if (config.scene == "walk")
+		wall_z_ = 34;
 	TextureBank bank(config.texture_dir, rng);
 	texture_origin_ = bank.dir().empty() ? "procedural" : bank.dir();
 
@@ -204,7 +226,7 @@ Scene::Scene(const SimConfig &config) : config_(config)
 		TexturedPlane wall;
 		wall.width_m = 40;
 		wall.height_m = 10;
-		wall.origin = {-20, kGroundY - wall.height_m, kWallZ};
+		wall.origin = {-20, kGroundY - wall.height_m, wall_z_};
 		wall.axis_u = {1, 0, 0};
 		wall.axis_v = {0, 1, 0};
 		wall.texture =
@@ -213,11 +235,24 @@ Scene::Scene(const SimConfig &config) : config_(config)
 			       2640, 660);
 		background_.push_back(std::move(wall));
 	}
-	// The ground: aerial photographs, 120 px per metre.
-	{
+	// The ground: aerial photographs, 120 px per metre (the walk's street: photographs at 200 px per metre,
+	// 8 m wide, so the pavement a few metres ahead still has real detail).
+	if (config.scene == "walk") {
+		TexturedPlane ground;
+		ground.width_m = 8;
+		ground.height_m = wall_z_ + 6;
+		ground.origin = {-4, kGroundY, -6};
+		ground.axis_u = {1, 0, 0};
+		ground.axis_v = {0, 0, 1};
+		ground.texture = mosaic_grid({bank.photo({"aero1.jpg"}), bank.photo({"aero3.jpg"}),
+					      bank.photo({"board.jpg"}), bank.photo({"stuff.jpg"})},
+					     static_cast<int>(ground.width_m * 200),
+					     static_cast<int>(ground.height_m * 200), 400);
+		background_.push_back(std::move(ground));
+	} else {
 		TexturedPlane ground;
 		ground.width_m = 40;
-		ground.height_m = kWallZ - 0.3;
+		ground.height_m = wall_z_ - 0.3;
 		ground.origin = {-20, kGroundY, 0.3};
 		ground.axis_u = {1, 0, 0};
 		ground.axis_v = {0, 0, 1};
@@ -251,6 +286,20 @@ Scene::Scene(const SimConfig &config) : config_(config)
 		specs.push_back({1.5, 9.0, 0, -1.0, 0, 0, 5.0, 10.0, 0});
 	} else if (scene == "toward") { // a mover walking straight at the camera
 		specs.push_back({0.3, 10.0, 0, -1.3, 0, 0, 2.2, 10.5, 0});
+	} else if (scene == "walk") {
+		// A rig carried forward down a street at walking speed (seed 001's setting): buildings on both sides
+		// and street furniture give near static structure; walkers cross, one walks straight at the rig, one
+		// keeps pace beside it. 12 m forward and back in 20 s (up to 1.9 m/s), a 1.5 cm bob at 2 steps/s.
+		walk_range_m_ = 12;
+		walk_period_s_ = 20;
+		walk_phase_s_ = 2.5; // already walking at 1.3 m/s on the first frame
+		bob_amplitude_m_ = 0.015;
+		yaw_amplitude_rad_ = 1.5 * std::numbers::pi / 180;
+		sway_amplitude_m_ = 0.03;
+		motion_period_s_ = 5;
+		specs.push_back({-2.4, 8.0, 1.2, 0, -2.6, 2.6, 0, 0, 0});    // crosses left to right
+		specs.push_back({2.2, 14.0, -1.0, 0, -2.6, 2.6, 0, 0, 1.0}); // crosses right to left
+		specs.push_back({0.7, 22.0, 0, -1.3, 0, 0, 4.0, 24.0, 0});   // walks at the rig
 	} else if (scene == "default") { // a mix: near and far, across, along and toward; slow pan
 		yaw_amplitude_rad_ = 4.0 * std::numbers::pi / 180;
 		sway_amplitude_m_ = 0.05;
@@ -260,7 +309,7 @@ Scene::Scene(const SimConfig &config) : config_(config)
 		specs.push_back({-2.6, 6.0, 0, 0.9, 0, 0, 5.0, 11.0, 0});
 	} else {
 		throw SourceError("sim: unknown scene '" + scene +
-				  "' (known: default, static_near, static_far, moving_one, moving_many, toward)");
+				  "' (known: default, static_near, static_far, moving_one, moving_many, toward, walk)");
 	}
 
 	// Finely textured photographs, used at (nearly) their own resolution: people wear patterned clothes.
@@ -284,8 +333,79 @@ Scene::Scene(const SimConfig &config) : config_(config)
 					      mover.width_m, mover.height_m, 400, rng);
 		movers_.push_back(std::move(mover));
 	}
+	if (scene == "walk") {
+		// The walker keeping pace: 1.3 m to the right, 3.5 m ahead of the rig, whatever the rig does.
+		Mover pacer;
+		pacer.id = id++;
+		pacer.width_m = 0.6 * uniform(rng, 0.9, 1.1);
+		pacer.height_m = 1.75 * uniform(rng, 0.95, 1.05);
+		pacer.paces_camera = true;
+		pacer.pace_offset = {1.3, kGroundY, 3.5};
+		pacer.texture = mover_texture(mover_photos[(pacer.id + config.seed) % mover_photos.size()],
+					      pacer.width_m, pacer.height_m, 400, rng);
+		movers_.push_back(std::move(pacer));
+		// The street: facades on both sides, 3.2 m from the rig's line, and posts and boxes along it.
+		const std::array<std::pair<std::vector<std::string>, double>, 2> sides = {
+			std::pair{std::vector<std::string>{"building.jpg", "home.jpg", "leuvenA.jpg"}, -3.2},
+			std::pair{std::vector<std::string>{"graf1.png", "leuvenB.jpg", "building.jpg"}, 3.2}};
+		for (const auto &[photos, x] : sides) {
+			TexturedPlane facade;
+			facade.width_m = wall_z_ + 6;
+			facade.height_m = 6;
+			facade.origin = {x, kGroundY - facade.height_m, -6};
+			facade.axis_u = {0, 0, 1};
+			facade.axis_v = {0, 1, 0};
+			std::vector<cv::Mat> tiles;
+			for (const auto &name : photos)
+				tiles.push_back(bank.photo({name.c_str()}));
+			facade.texture = mosaic_grid(tiles, static_cast<int>(facade.width_m * 200), 1200, 400);
+			background_.push_back(std::move(facade));
+		}
+		const std::array<cv::Vec3d, 6> furniture = {cv::Vec3d{-2.2, 0, 5.5},  cv::Vec3d{2.3, 0, 10.0},
+							    cv::Vec3d{-2.0, 0, 16.0}, cv::Vec3d{2.1, 0, 21.0},
+							    cv::Vec3d{-2.3, 0, 26.0}, cv::Vec3d{1.9, 0, 30.0}};
+		const std::vector<cv::Mat> box_photos = {bank.photo({"box.png"}), bank.photo({"fruits.jpg"}),
+							 bank.photo({"blox.jpg"}), bank.photo({"board.jpg"})};
+		for (size_t k = 0; k < furniture.size(); ++k) {
+			TexturedPlane box;
+			box.width_m = 0.8;
+			box.height_m = 1.2;
+			box.origin = {furniture[k][0] - box.width_m / 2, kGroundY - box.height_m, furniture[k][2]};
+			box.axis_u = {1, 0, 0};
+			box.axis_v = {0, 1, 0};
+			box.texture =
+				mover_texture(box_photos[k % box_photos.size()], box.width_m, box.height_m, 300, rng);
+			furniture_.push_back(std::move(box));
+		}
+	}
 	if (movers_.size() > FrameTruth::kMaxObjects)
 		throw SourceError("sim: too many movers");
+}
+
+std::pair<cv::Vec3d, cv::Vec3d> Scene::camera_centre(double t) const
+{
+	const double phase = 2 * std::numbers::pi * t / motion_period_s_;
+	cv::Vec3d centre(sway_amplitude_m_ * std::sin(0.6 * phase + 1.0), 0, 0);
+	cv::Vec3d velocity(
+		sway_amplitude_m_ * std::cos(0.6 * phase + 1.0) * 0.6 * 2 * std::numbers::pi / motion_period_s_, 0, 0);
+	if (walk_range_m_ > 0) {
+		const double w = 2 * std::numbers::pi / walk_period_s_;
+		centre[2] = walk_range_m_ * (1 - std::cos(w * (t + walk_phase_s_))) / 2;
+		velocity[2] = walk_range_m_ * w * std::sin(w * (t + walk_phase_s_)) / 2;
+		const double s = 2 * std::numbers::pi * step_frequency_hz_;
+		centre[1] = -bob_amplitude_m_ * std::abs(std::sin(s * t / 2));
+		velocity[1] = -bob_amplitude_m_ * std::cos(s * t / 2) * s / 2 * (std::sin(s * t / 2) >= 0 ? 1 : -1);
+	}
+	return {centre, velocity};
+}
+
+std::pair<cv::Vec3d, cv::Vec3d> Scene::mover_state(const Mover &mover, double t) const
+{
+	if (!mover.paces_camera)
+		return mover.state_at(t);
+	const auto [centre, velocity] = camera_centre(t);
+	return {cv::Vec3d(centre[0] + mover.pace_offset[0], mover.pace_offset[1], centre[2] + mover.pace_offset[2]),
+		cv::Vec3d(velocity[0], 0, velocity[2])};
 }
 
 Pose Scene::left_pose(double t) const
@@ -293,7 +413,7 @@ Pose Scene::left_pose(double t) const
 	const double phase = 2 * std::numbers::pi * t / motion_period_s_;
 	const cv::Matx33d r_wc = rotation_y(yaw_amplitude_rad_ * std::sin(phase)) *
 				 rotation_x(pitch_amplitude_rad_ * std::sin(1.7 * phase + 0.5));
-	const cv::Vec3d centre(sway_amplitude_m_ * std::sin(0.6 * phase + 1.0), 0, 0);
+	const cv::Vec3d centre = camera_centre(t).first;
 	const cv::Matx33d r_cw = r_wc.t();
 	return {r_cw, -(r_cw * centre)};
 }
@@ -390,6 +510,15 @@ void Scene::render(double t, const Pose &pose, cv::Mat &image, cv::Mat &object_i
 		depth.setTo(0);
 	for (const auto &plane : background_)
 		draw_plane(plane, pose, image, object_ids, depth, scratch);
+	// Street furniture far to near (static, so it never hides behind the wall or ground).
+	std::array<std::pair<double, size_t>, 16> furniture_order{};
+	const size_t furniture_count = std::min(furniture_.size(), furniture_order.size());
+	for (size_t i = 0; i < furniture_count; ++i)
+		furniture_order[i] = {(pose.r_cw * furniture_[i].origin + pose.t_cw)[2], i};
+	std::sort(furniture_order.begin(), furniture_order.begin() + static_cast<std::ptrdiff_t>(furniture_count),
+		  [](const auto &a, const auto &b) { return a.first > b.first; });
+	for (size_t k = 0; k < furniture_count; ++k)
+		draw_plane(furniture_[furniture_order[k].second], pose, image, object_ids, depth, scratch);
 
 	// Movers far to near, so nearer ones cover farther ones (they never intersect: all stand upright).
 	std::array<std::pair<double, size_t>, FrameTruth::kMaxObjects> order{};
@@ -397,14 +526,14 @@ void Scene::render(double t, const Pose &pose, cv::Mat &image, cv::Mat &object_i
 	for (size_t i = 0; i < movers_.size(); ++i) {
 		if (t < movers_[i].start_time_s)
 			continue;
-		const cv::Vec3d cam = pose.r_cw * movers_[i].state_at(t).first + pose.t_cw;
+		const cv::Vec3d cam = pose.r_cw * mover_state(movers_[i], t).first + pose.t_cw;
 		order[count++] = {cam[2], i};
 	}
 	std::sort(order.begin(), order.begin() + static_cast<std::ptrdiff_t>(count),
 		  [](const auto &a, const auto &b) { return a.first > b.first; });
 	for (size_t k = 0; k < count; ++k) {
 		const Mover &mover = movers_[order[k].second];
-		const cv::Vec3d bottom = mover.state_at(t).first;
+		const cv::Vec3d bottom = mover_state(mover, t).first;
 		TexturedPlane board;
 		board.origin = bottom + cv::Vec3d(-mover.width_m / 2, -mover.height_m, 0);
 		board.axis_u = {1, 0, 0};
@@ -431,7 +560,7 @@ void Scene::fill_truth(double t, FrameTruth &truth) const
 	for (const auto &mover : movers_) {
 		if (t < mover.start_time_s)
 			continue;
-		const auto [bottom, velocity] = mover.state_at(t);
+		const auto [bottom, velocity] = mover_state(mover, t);
 		const cv::Vec3d centre_w = bottom + cv::Vec3d(0, -mover.height_m / 2, 0);
 		const cv::Vec3d p = pose.r_cw * centre_w + pose.t_cw;
 		const cv::Vec3d v = pose.r_cw * velocity;

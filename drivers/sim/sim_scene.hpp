@@ -42,6 +42,10 @@ struct Mover {
 	cv::Vec2d x_bounds;	 ///< the mover turns around outside [lo, hi] in x ...
 	cv::Vec2d z_bounds;	 ///< ... and in z
 	double start_time_s = 0; ///< invisible before this
+	/// Walks beside the camera instead: bottom centre = the camera's centre + pace_offset (on the ground),
+	/// with the camera's velocity (seed 001 Fig. 4: a person keeping pace with a walking rig).
+	bool paces_camera = false;
+	cv::Vec3d pace_offset;
 	cv::Mat texture;
 	/// Bottom-centre position and velocity at time t (a triangle wave between the bounds).
 	[[nodiscard]] std::pair<cv::Vec3d, cv::Vec3d> state_at(double t) const;
@@ -76,6 +80,10 @@ public:
 		    RenderScratch &scratch) const;
 	/// Fills the truth for the left camera at time t (pose, movers' states).
 	void fill_truth(double t, FrameTruth &truth) const;
+	/// A mover's bottom-centre position and velocity in the world at time t.
+	[[nodiscard]] std::pair<cv::Vec3d, cv::Vec3d> mover_state(const Mover &mover, double t) const;
+	/// The left camera's centre in the world at time t, and its velocity.
+	[[nodiscard]] std::pair<cv::Vec3d, cv::Vec3d> camera_centre(double t) const;
 
 private:
 	void draw_plane(const TexturedPlane &plane, const Pose &pose, cv::Mat &image, cv::Mat &object_ids,
@@ -84,6 +92,7 @@ private:
 	SimConfig config_;
 	CameraIntrinsics intrinsics_;
 	std::vector<TexturedPlane> background_; ///< drawn first, far to near
+	std::vector<TexturedPlane> furniture_;	///< static boards standing on the ground, drawn next by depth
 	std::vector<Mover> movers_;
 	std::string texture_origin_;
 	// Camera motion: yaw(t) = yaw_amp sin(2 pi t / period), sway x(t) = sway_amp sin(...), forward speed.
@@ -91,6 +100,14 @@ private:
 	double pitch_amplitude_rad_ = 0;
 	double sway_amplitude_m_ = 0;
 	double motion_period_s_ = 8;
+	// Walking (scene "walk"): z(t) = range (1 - cos(2 pi (t + phase) / period)) / 2, a forward walk that slows
+	// and turns back smoothly at the ends; the step's vertical bob and sideways sway on top.
+	double walk_range_m_ = 0;
+	double walk_period_s_ = 20;
+	double walk_phase_s_ = 0;
+	double bob_amplitude_m_ = 0;
+	double step_frequency_hz_ = 2;
+	double wall_z_ = 14;
 };
 
 /// Where the sim looks for photographs when SimConfig::texture_dir is empty.

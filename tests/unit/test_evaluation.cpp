@@ -68,3 +68,85 @@ TEST(Evaluation, CountsLabelsPerMover)
 	EXPECT_EQ(counts[2].uncertain, 2U);
 	EXPECT_EQ(counts[2].recall(), 0.0);
 }
+
+// ------------------------------------------------------------------------------------------ trajectories
+#include <cstdio>
+#include <filesystem>
+
+#include "tools/trajectory.hpp"
+
+namespace {
+
+geometry::Pose at(double x, double y, double z, double yaw = 0)
+{
+	return {geometry::rotation_from_vector({0, yaw, 0}), {x, y, z}};
+}
+
+} // namespace
+
+TEST(Trajectory, HandComputedErrors)
+{
+	// Truth: 1 m steps along z. Estimate: the same, with the third pose 0.3 m off in x.
+	const std::vector<geometry::Pose> truth = {at(0, 0, 0), at(0, 0, 1), at(0, 0, 2), at(0, 0, 3)};
+	const std::vector<geometry::Pose> estimate = {at(0, 0, 0), at(0, 0, 1), at(0.3, 0, 2), at(0, 0, 3)};
+	// RPE over one frame: steps 0->1 exact, 1->2 off by 0.3, 2->3 off by 0.3: RMSE sqrt(2 * 0.09 / 3).
+	const RelativeError rpe = relative_pose_error(estimate, truth, 1);
+	ASSERT_EQ(rpe.translation_m.count, 3U);
+	EXPECT_NEAR(rpe.translation_m.rmse, std::sqrt(0.06), 1e-12);
+	EXPECT_NEAR(rpe.translation_m.mean, 0.2, 1e-12);
+	EXPECT_NEAR(rpe.translation_m.median, 0.3, 1e-12);
+	EXPECT_NEAR(rpe.translation_m.max, 0.3, 1e-12);
+	EXPECT_NEAR(rpe.rotation_deg.max, 0, 1e-9);
+	// Drift over windows of 2 frames (2 m each): 0->2 off by 0.3 (15 %), 1->3 exact (0 %): mean 7.5 %.
+	const Drift d = drift(estimate, truth, 2);
+	EXPECT_EQ(d.windows, 2U);
+	EXPECT_NEAR(d.translation_percent, 7.5, 1e-9);
+
+	// ATE: an estimate that is the truth moved and turned as a whole has none.
+	const geometry::Pose offset{geometry::rotation_from_vector({0.1, 0.7, -0.2}), {5, -2, 1}};
+	std::vector<geometry::Pose> moved;
+	for (const auto &p : truth)
+		moved.push_back(offset * p);
+	EXPECT_NEAR(absolute_trajectory_error(moved, truth).translation_m.rmse, 0, 1e-9);
+	// Offsets of +0.1, -0.1, -0.1, +0.1 m in x along the line: no rigid motion reduces them (their mean and
+	// their trend along z are zero), so every pose is 0.1 m off: RMSE 0.1.
+	std::vector<geometry::Pose> wobbly = {offset * at(0.1, 0, 0), offset * at(-0.1, 0, 1), offset * at(-0.1, 0, 2),
+					      offset * at(0.1, 0, 3)};
+	const AbsoluteError ate = absolute_trajectory_error(wobbly, truth);
+	EXPECT_NEAR(ate.translation_m.rmse, 0.1, 1e-9);
+	EXPECT_NEAR(ate.translation_m.max, 0.1, 1e-9);
+
+	// Rotation error: a 2-degree yaw step error.
+	const std::vector<geometry::Pose> turned = {at(0, 0, 0), at(0, 0, 1, 2 * CV_PI / 180)};
+	EXPECT_NEAR(relative_pose_error(turned, {at(0, 0, 0), at(0, 0, 1)}, 1).rotation_deg.max, 2, 1e-9);
+}
+
+TEST(Trajectory, TumAndKittiFilesRoundTripAndNameTheBadLine)
+{
+	const auto dir = std::filesystem::temp_directory_path() / ("stereod-traj-" + std::to_string(::getpid()));
+	std::filesystem::create_directories(dir);
+	std::vector<StampedPose> poses = {{0.0, at(0, 0, 0)}, {0.05, at(1, 2, 3, 0.3)}};
+	write_tum((dir / "a.tum").string(), poses);
+	const auto back = read_tum((dir / "a.tum").string());
+	ASSERT_EQ(back.size(), 2U);
+	EXPECT_NEAR(back[1].t_s, 0.05, 1e-9);
+	EXPECT_LT(cv::norm(back[1].pose.t - poses[1].pose.t), 1e-9);
+	EXPECT_LT((back[1].pose.inverse() * poses[1].pose).angle(), 1e-8);
+
+	// Associated by time: an estimate 5 ms off still finds its truth, one 50 ms off does not.
+	const Association pairs = associate({{0.005, at(0, 0, 0)}, {0.2, at(0, 0, 0)}}, back, 0.02);
+	EXPECT_EQ(pairs.estimate.size(), 1U);
+
+	{
+		std::FILE *f = std::fopen((dir / "kitti.txt").c_str(), "w");
+		std::fputs("1 0 0 0 0 1 0 0 0 0 1 0\n1 0 0 0.5 0 1 0 0 0 0 1 2\n1 0 0 1\n", f);
+		std::fclose(f);
+	}
+	try {
+		read_kitti_poses((dir / "kitti.txt").string());
+		ADD_FAILURE() << "a short line was accepted";
+	} catch (const std::runtime_error &e) {
+		EXPECT_NE(std::string(e.what()).find("kitti.txt:3:"), std::string::npos) << e.what();
+	}
+	std::filesystem::remove_all(dir);
+}

@@ -42,7 +42,9 @@ TEST(Protocol, FrameMessageRoundTrips)
 	r.seq = 7;
 	r.source = "video";
 	r.points = {{5.5F, 6.25F, PointLabel::Uncertain, 5.0F, 6.0F, 77, std::nullopt}};
-	r.ego = EgoMotion{{1, 0, 2, 0, 1, 3, 0, 0, 1}, 99};
+	r.ego = EgoMotion{};
+	r.ego->homography = std::array<double, 9>{1, 0, 2, 0, 1, 3, 0, 0, 1};
+	r.ego->inliers = 99;
 	const FrameResult back = protocol::parse_frame_message(nlohmann::json::parse(protocol::frame_message(r)));
 	EXPECT_EQ(back.seq, 7U);
 	EXPECT_EQ(back.source, "video");
@@ -52,7 +54,45 @@ TEST(Protocol, FrameMessageRoundTrips)
 	EXPECT_EQ(back.points[0].track, 77U);
 	ASSERT_TRUE(back.ego.has_value());
 	EXPECT_EQ(back.ego->inliers, 99);
-	EXPECT_DOUBLE_EQ(back.ego->homography[2], 2.0);
+	ASSERT_TRUE(back.ego->homography.has_value());
+	EXPECT_DOUBLE_EQ((*back.ego->homography)[2], 2.0);
+	EXPECT_FALSE(back.ego->valid.has_value()); // monocular: no pose fields at all
+}
+
+TEST(Protocol, StereoPoseAndDepthRoundTrip)
+{
+	FrameResult r;
+	r.points = {{5.5F, 6.25F, PointLabel::Static, 5.0F, 6.0F, 3, std::array<float, 3>{0.25F, -0.5F, 4.125F}}};
+	EgoMotion ego;
+	ego.valid = true;
+	ego.inliers = 321;
+	ego.t_prev_curr = std::array<double, 16>{1, 0, 0, 0.01, 0, 1, 0, 0, 0, 0, 1, 0.0466667, 0, 0, 0, 1};
+	ego.t_world_curr = ego.t_prev_curr;
+	r.ego = ego;
+	r.stereo = StereoSummary{900, 612, 700, 7, -0.125F};
+	const std::string text = protocol::frame_message(r);
+	const auto json = nlohmann::json::parse(text);
+	EXPECT_TRUE(json.at("ego").at("homography").is_null());
+	EXPECT_FALSE(json.at("ego").contains("reason"));
+	EXPECT_EQ(json.at("ego").at("T_prev_curr").size(), 16U);
+	const FrameResult back = protocol::parse_frame_message(json);
+	ASSERT_TRUE(back.points[0].xyz_m.has_value());
+	EXPECT_FLOAT_EQ((*back.points[0].xyz_m)[2], 4.125F);
+	ASSERT_TRUE(back.ego && back.ego->valid && back.ego->t_world_curr);
+	EXPECT_TRUE(*back.ego->valid);
+	EXPECT_NEAR((*back.ego->t_prev_curr)[11], 0.0466667, 1e-9);
+	EXPECT_EQ(back.ego->inliers, 321);
+	ASSERT_TRUE(back.stereo.has_value());
+	EXPECT_EQ(back.stereo->matched, 612);
+	EXPECT_FLOAT_EQ(back.stereo->median_row_diff_px, -0.125F);
+
+	ego.valid = false;
+	ego.reason = "only 3 static points with depth (need 15)";
+	r.ego = ego;
+	const FrameResult lost = protocol::parse_frame_message(nlohmann::json::parse(protocol::frame_message(r)));
+	ASSERT_TRUE(lost.ego && lost.ego->valid);
+	EXPECT_FALSE(*lost.ego->valid);
+	EXPECT_EQ(lost.ego->reason, ego.reason);
 }
 
 TEST(Protocol, RejectsOtherVersions)

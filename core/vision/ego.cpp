@@ -1,0 +1,305 @@
+#include "core/vision/ego.hpp"
+
+#include <cmath>
+#include <limits>
+#include <numbers>
+#include <random>
+
+#include <opencv2/calib3d.hpp>
+
+namespace stereod::vision {
+
+namespace {
+
+constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+/// Estimation noise on top of the acceleration bounds: the previous motion the prior extrapolates is itself
+/// measured to about this.
+constexpr double kPriorSlackM = 0.003;
+constexpr double kPriorSlackRad = 0.001;
+
+/// The standard normal quantile by bisection on the CDF (only called with a handful of probabilities).
+double normal_quantile(double p)
+{
+	double lo = -10, hi = 10;
+	for (int i = 0; i < 100; ++i) {
+		const double mid = (lo + hi) / 2;
+		(0.5 * std::erfc(-mid / std::numbers::sqrt2) < p ? lo : hi) = mid;
+	}
+	return (lo + hi) / 2;
+}
+
+std::vector<int> inliers_of(const std::vector<cv::Point3f> &object, const std::vector<cv::Point2f> &image,
+			    const geometry::StereoRig &rig, const geometry::Pose &pose, double threshold_px,
+			    double &rms_px)
+{
+	std::vector<int> inliers;
+	double sum2 = 0;
+	for (size_t i = 0; i < object.size(); ++i) {
+		const auto p = rig.project(pose * cv::Vec3d(object[i].x, object[i].y, object[i].z));
+		if (!p)
+			continue;
+		const double dx = p->x - image[i].x, dy = p->y - image[i].y;
+		const double e2 = dx * dx + dy * dy;
+		if (e2 <= threshold_px * threshold_px) {
+			inliers.push_back(static_cast<int>(i));
+			sum2 += e2;
+		}
+	}
+	rms_px = inliers.empty() ? 0 : std::sqrt(sum2 / static_cast<double>(inliers.size()));
+	return inliers;
+}
+
+geometry::Pose pose_of(const cv::Mat &rvec, const cv::Mat &tvec)
+{
+	geometry::Pose pose;
+	pose.r = geometry::rotation_from_vector(cv::Vec3d(rvec));
+	pose.t = cv::Vec3d(tvec);
+	return pose;
+}
+
+} // namespace
+
+double chi2_quantile(int dof, double p)
+{
+	// Wilson-Hilferty: chi2_k(p) ~ k (1 - 2/(9k) + z_p sqrt(2/(9k)))^3, within 1 % for k >= 1 at p >= 0.9.
+	const double k = std::max(dof, 1);
+	const double a = 2.0 / (9.0 * k);
+	const double c = 1 - a + normal_quantile(p) * std::sqrt(a);
+	return k * c * c * c;
+}
+
+MotionPrior MotionPrior::constant_velocity(const geometry::Pose &last_motion, double last_interval_s, double interval_s,
+					   const EgoParams &params)
+{
+	MotionPrior prior;
+	const double scale = last_interval_s > 0 && interval_s > 0 ? interval_s / last_interval_s : 1.0;
+	prior.predicted.r = geometry::rotation_from_vector(geometry::vector_from_rotation(last_motion.r) * scale);
+	prior.predicted.t = last_motion.t * scale;
+	// A velocity change of a * dt moves the camera by up to a * dt^2 more (or less) than predicted.
+	prior.translation_tolerance_m = params.max_acceleration_mps2 * interval_s * interval_s;
+	prior.rotation_tolerance_rad = params.max_angular_acceleration_radps2 * interval_s * interval_s;
+	return prior;
+}
+
+PoseEstimate estimate_pose(std::span<const cv::Vec3f> prev_xyz, std::span<const cv::Point2f> cur_px,
+			   std::span<const uint8_t> votes, const geometry::StereoRig &rig, const EgoParams &params,
+			   const MotionPrior *prior)
+{
+	PoseEstimate out;
+	const size_t n = std::min(prev_xyz.size(), cur_px.size());
+	out.inlier_mask.assign(n, 0);
+	std::vector<cv::Point3f> object;
+	std::vector<cv::Point2f> image;
+	std::vector<size_t> index;
+	for (size_t i = 0; i < n; ++i) {
+		const cv::Vec3f &p = prev_xyz[i];
+		if ((i < votes.size() && votes[i] == 0) || !std::isfinite(p[2]) || !(p[2] > 0) ||
+		    p[2] > static_cast<float>(params.max_depth_m))
+			continue;
+		object.emplace_back(p[0], p[1], p[2]);
+		image.push_back(cur_px[i]);
+		index.push_back(i);
+	}
+	out.candidates = static_cast<int>(object.size());
+	if (prior != nullptr && (prior->translation_tolerance_m > 0 || prior->rotation_tolerance_rad > 0)) {
+		// Keep the points the predicted motion explains within what the tolerances allow at their depth:
+		// a rotation error moves every point by about f * dr, a translation error by f * dt / z.
+		std::vector<cv::Point3f> gated_object;
+		std::vector<cv::Point2f> gated_image;
+		std::vector<size_t> gated_index;
+		for (size_t k = 0; k < object.size(); ++k) {
+			const cv::Vec3d p(object[k].x, object[k].y, object[k].z);
+			const auto predicted = rig.project(prior->predicted * p);
+			if (!predicted)
+				continue;
+			const double allowed =
+				params.ransac_threshold_px + rig.fx * prior->rotation_tolerance_rad +
+				rig.fx * prior->translation_tolerance_m / std::max<double>(object[k].z, 0.1);
+			if (std::hypot(predicted->x - image[k].x, predicted->y - image[k].y) <= allowed) {
+				gated_object.push_back(object[k]);
+				gated_image.push_back(image[k]);
+				gated_index.push_back(index[k]);
+			}
+		}
+		if (static_cast<int>(gated_object.size()) >= std::max(params.min_inliers, 6)) {
+			object = std::move(gated_object);
+			image = std::move(gated_image);
+			index = std::move(gated_index);
+			out.prior_used = true;
+		}
+	}
+	if (static_cast<int>(object.size()) < std::max(params.min_inliers, 6)) {
+		out.reason = "only " + std::to_string(out.candidates) + " static points with depth (need " +
+			     std::to_string(std::max(params.min_inliers, 6)) + ")";
+		return out;
+	}
+	// RANSAC over P3P hypotheses, each scored by its inliers; with a prior, a hypothesis the camera cannot
+	// reach within the acceleration bounds is not considered at all. A fixed generator seed keeps a replay
+	// giving the same poses.
+	const auto plausible = [&](const geometry::Pose &pose) {
+		if (prior == nullptr)
+			return true;
+		return cv::norm(pose.t - prior->predicted.t) <= prior->translation_tolerance_m + kPriorSlackM &&
+		       (prior->predicted.inverse() * pose).angle() <= prior->rotation_tolerance_rad + kPriorSlackRad;
+	};
+	const cv::Matx33d k = rig.k();
+	std::mt19937 rng(0x5eed);
+	std::uniform_int_distribution<size_t> pick(0, object.size() - 1);
+	double rms = 0;
+	std::vector<int> inliers;
+	geometry::Pose best;
+	for (int iteration = 0; iteration < params.ransac_iterations; ++iteration) {
+		std::array<size_t, 3> sample{};
+		sample[0] = pick(rng);
+		do
+			sample[1] = pick(rng);
+		while (sample[1] == sample[0]);
+		do
+			sample[2] = pick(rng);
+		while (sample[2] == sample[0] || sample[2] == sample[1]);
+		std::vector<cv::Point3f> sample_object;
+		std::vector<cv::Point2f> sample_image;
+		for (size_t i : sample) {
+			sample_object.push_back(object[i]);
+			sample_image.push_back(image[i]);
+		}
+		std::vector<cv::Mat> rvecs, tvecs;
+		const int solutions =
+			cv::solveP3P(sample_object, sample_image, k, cv::noArray(), rvecs, tvecs, cv::SOLVEPNP_AP3P);
+		for (int solution = 0; solution < solutions; ++solution) {
+			const geometry::Pose hypothesis =
+				pose_of(rvecs[static_cast<size_t>(solution)], tvecs[static_cast<size_t>(solution)]);
+			if (!plausible(hypothesis))
+				continue;
+			double hypothesis_rms = 0;
+			std::vector<int> support =
+				inliers_of(object, image, rig, hypothesis, params.ransac_threshold_px, hypothesis_rms);
+			if (support.size() > inliers.size()) {
+				inliers = std::move(support);
+				best = hypothesis;
+			}
+		}
+	}
+	if (static_cast<int>(inliers.size()) < params.min_inliers) {
+		out.reason = "no consistent motion: " + std::to_string(inliers.size()) + " of " +
+			     std::to_string(out.candidates) + " points agree" +
+			     (prior != nullptr ? " within the acceleration bounds" : "");
+		return out;
+	}
+	// Levenberg-Marquardt on the inliers, then the inliers again with the refined pose, and once more. A
+	// refinement that leaves the bounds (it slid towards a mover among the inliers) is not taken.
+	cv::Mat rvec = cv::Mat(geometry::vector_from_rotation(best.r)).clone();
+	cv::Mat tvec = cv::Mat(best.t).clone();
+	for (int round = 0; round < 2; ++round) {
+		std::vector<cv::Point3f> in_object;
+		std::vector<cv::Point2f> in_image;
+		for (int i : inliers) {
+			in_object.push_back(object[static_cast<size_t>(i)]);
+			in_image.push_back(image[static_cast<size_t>(i)]);
+		}
+		cv::Mat r = rvec.clone(), t = tvec.clone();
+		cv::solvePnPRefineLM(in_object, in_image, k, cv::noArray(), r, t);
+		const geometry::Pose refined = pose_of(r, t);
+		if (!plausible(refined))
+			break;
+		std::vector<int> support = inliers_of(object, image, rig, refined, params.ransac_threshold_px, rms);
+		if (static_cast<int>(support.size()) < params.min_inliers)
+			break;
+		rvec = r, tvec = t;
+		inliers = std::move(support);
+	}
+	out.curr_from_prev = pose_of(rvec, tvec);
+	inliers = inliers_of(object, image, rig, out.curr_from_prev, params.ransac_threshold_px, rms);
+	out.inliers = static_cast<int>(inliers.size());
+	out.rms_px = rms;
+	for (int i : inliers)
+		out.inlier_mask[index[static_cast<size_t>(i)]] = 1;
+	if (out.inliers < params.min_inliers || !std::isfinite(out.curr_from_prev.t[0]) ||
+	    !std::isfinite(out.curr_from_prev.t[1]) || !std::isfinite(out.curr_from_prev.t[2])) {
+		out.reason = "refinement left " + std::to_string(out.inliers) + " inliers";
+		return out;
+	}
+	out.valid = true;
+	return out;
+}
+
+GeometricContext GeometricContext::make(const geometry::StereoRig &rig, const geometry::Pose &curr_from_prev,
+					double disparity_sigma_px, const EgoParams &params)
+{
+	GeometricContext context;
+	context.rig = rig;
+	context.curr_from_prev = curr_from_prev;
+	context.disparity_sigma_px = disparity_sigma_px;
+	context.params = params;
+	// Below a millimetre of translation there are no usable epipolar lines: the camera only turned.
+	context.fundamental = curr_from_prev.distance() > 1e-3
+				      ? geometry::fundamental_from_pose(rig.k(), curr_from_prev)
+				      : cv::Matx33d::zeros();
+	return context;
+}
+
+GeometricTest geometric_test(const GeometricContext &context, cv::Point2f prev_px, const cv::Vec3f &prev_xyz,
+			     cv::Point2f cur_px, float cur_depth_m)
+{
+	GeometricTest test;
+	test.predicted = {kNaN, kNaN};
+	const geometry::StereoRig &rig = context.rig;
+	const geometry::Pose &pose = context.curr_from_prev;
+	const EgoParams &params = context.params;
+	const double s2 = params.pixel_sigma_px * params.pixel_sigma_px;
+	const bool translated = cv::norm(context.fundamental) > 0;
+
+	// Where the point would be at infinite depth: the rotation alone moves it.
+	const cv::Vec3d ray = pose.r * cv::Vec3d((prev_px.x - rig.cx) / rig.fx, (prev_px.y - rig.cy) / rig.fy, 1);
+	const auto at_infinity = rig.project(ray);
+	const bool has_prev_depth = std::isfinite(prev_xyz[2]) && prev_xyz[2] > 0;
+	const cv::Point2d cur(cur_px.x, cur_px.y);
+
+	if (!has_prev_depth || !translated) {
+		if (!translated && at_infinity) {
+			// Only a turn: every static point lands where its ray does, whatever its depth.
+			const cv::Point2d r = cur - *at_infinity;
+			test.d1_px = std::hypot(r.x, r.y);
+			test.statistic = r.dot(r) / (2 * s2);
+			test.dof = 2;
+			test.predicted = cv::Point2f(*at_infinity);
+		} else if (translated) {
+			test.d1_px = geometry::epipolar_distance(context.fundamental, cv::Point2d(prev_px), cur);
+			test.statistic = test.d1_px * test.d1_px / (2 * s2);
+			test.dof = 1;
+		}
+		test.moving = test.dof > 0 && test.statistic > chi2_quantile(test.dof, params.chi2_quantile);
+		return test;
+	}
+
+	const cv::Vec3d moved = pose * cv::Vec3d(prev_xyz[0], prev_xyz[1], prev_xyz[2]);
+	const auto predicted = rig.project(moved);
+	if (!predicted || !at_infinity)
+		return test; // the point went behind the camera: nothing to compare
+	test.predicted = cv::Point2f(*predicted);
+	const cv::Point2d r = cur - *predicted;
+	test.d1_px = geometry::epipolar_distance(context.fundamental, cv::Point2d(prev_px), cur);
+	test.statistic = test.d1_px * test.d1_px / (2 * s2);
+	test.dof = 1;
+	if (params.along_line) {
+		test.along_px = std::sqrt(std::max(0.0, r.dot(r) - test.d1_px * test.d1_px));
+		const double parallax = cv::norm(*predicted - *at_infinity);
+		const double z_prev = prev_xyz[2];
+		const double relative = rig.depth_sigma(z_prev, context.disparity_sigma_px) / z_prev;
+		const double var = 2 * s2 + parallax * parallax * relative * relative;
+		test.statistic += test.along_px * test.along_px / var;
+		++test.dof;
+	}
+	if (params.depth_check && std::isfinite(cur_depth_m) && cur_depth_m > 0) {
+		const double z_pred = moved[2];
+		test.d2_m = z_pred - cur_depth_m;
+		const double sp = rig.depth_sigma(z_pred, context.disparity_sigma_px);
+		const double sm = rig.depth_sigma(cur_depth_m, context.disparity_sigma_px);
+		test.statistic += test.d2_m * test.d2_m / (sp * sp + sm * sm);
+		++test.dof;
+	}
+	test.moving = test.statistic > chi2_quantile(test.dof, params.chi2_quantile);
+	return test;
+}
+
+} // namespace stereod::vision

@@ -1,0 +1,110 @@
+#pragma once
+// Ego-motion from stereo and seed 001's geometric dynamic check (../shared/seeds/001_*.txt, section III.C).
+//
+//   estimate_pose     static candidates' 3D points at frame n-1 (stereo) and their pixels at frame n ->
+//                     the camera's motion, by RANSAC PnP then Levenberg-Marquardt on the inliers
+//   geometric_test    per point, with that motion: eq. 1's epipolar distance d1, the position along the
+//                     epipolar line, and eqs. 2-4's depth error d2 = Z_predicted - Z_measured
+//
+// Normalisation (where the seed adds pixels to metres with theta = 0.1): each term is divided by its own
+// standard deviation and the squares summed, a chi-square statistic with one degree of freedom per term:
+//   d1     sigma^2 = 2 s_px^2                  (the feature position noise at both ends)
+//   along  sigma^2 = 2 s_px^2 + (L s_z / Z)^2  (L: how far depth moves the prediction along the line,
+//                                               the parallax between the point's projection and the
+//                                               projection at infinite depth; s_z/Z its depth's relative noise)
+//   d2     sigma^2 = s_z(Z_pred)^2 + s_z(Z_meas)^2, s_z(Z) = Z^2 / (f b) s_d (stereo depth noise)
+// A point is moving when the statistic exceeds the chi-square quantile for its degrees of freedom.
+// Seed 001 uses d1 and d2 only; the along-line term is what a metric pose adds (a point walking along its
+// epipolar line, as a person walking at a camera that walks forward does, changes only that term and d2).
+#include <cstdint>
+#include <span>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "core/geometry/rig.hpp"
+
+namespace stereod::vision {
+
+struct EgoParams {
+	bool enabled = true;		  ///< estimate the pose when the source is stereo (or RGB-D) and calibrated
+	double ransac_threshold_px = 2.0; ///< PnP RANSAC inlier distance
+	int ransac_iterations = 200;	  ///< P3P samples (up to four hypotheses each)
+	int min_inliers = 15;		  ///< fewer: the pose is not trusted (ego.valid = false)
+	double max_depth_m = 60;	  ///< farther points carry no translation; they still vote for rotation
+	double pixel_sigma_px = 1.0;	  ///< feature position noise for the geometric test
+	double chi2_quantile = 0.99;	  ///< the geometric test's false-alarm rate is 1 - this
+	bool along_line = true;		  ///< include the along-the-epipolar-line term (seed 001 has d1 and d2 only)
+	bool depth_check = true;	  ///< include eq. 4's depth term d2 (needs depth at frame n)
+	/// A point is labelled dynamic only when the test fails in this many consecutive frames of its track
+	/// (until then it is uncertain): a one-frame failure is usually a mismatch or a stereo error at an
+	/// occlusion edge, a mover keeps failing. 1 = every frame alone, as the seed.
+	int confirm_frames = 2;
+	/// Motion prior: the camera keeps its velocity within these accelerations between frames. Only points
+	/// the predicted motion explains within what the accelerations allow may vote. Without it a near,
+	/// well-textured mover can win RANSAC: far points cannot tell a turn from a sideways step, so "the
+	/// camera followed the mover" explains the far scene and the mover together (docs/geometry.md). 0 = off.
+	double max_acceleration_mps2 = 10;	    ///< about 1 g: a walking person or a robot braking hard
+	double max_angular_acceleration_radps2 = 5; ///< a quick head turn
+};
+
+/// The motion the prior predicts for frame n, and how far the truth may be from it.
+struct MotionPrior {
+	geometry::Pose predicted; ///< curr_from_prev if the camera kept its last motion
+	double translation_tolerance_m = 0;
+	double rotation_tolerance_rad = 0;
+	/// The prior for a frame `interval_s` after the previous one, whose motion over `last_interval_s` was
+	/// `last_motion` (constant velocity, scaled to the new interval).
+	static MotionPrior constant_velocity(const geometry::Pose &last_motion, double last_interval_s,
+					     double interval_s, const EgoParams &params);
+};
+
+struct PoseEstimate {
+	bool valid = false;
+	std::string reason;	       ///< why not, when !valid
+	geometry::Pose curr_from_prev; ///< x_curr = R x_prev + t
+	int candidates = 0;	       ///< points that could vote
+	int inliers = 0;
+	std::vector<uint8_t> inlier_mask; ///< per input point
+	double rms_px = 0;		  ///< re-projection RMS over the inliers
+	bool prior_used = false;	  ///< the candidates were gated by the motion prior
+};
+
+/// `prev_xyz` (frame n-1's camera, NaN = no depth) and `cur_px` are index-aligned; `votes[i] == 0` keeps a
+/// point out (known movers, the person prior). With a prior, a point votes only if the predicted motion
+/// explains it within the prior's tolerance (and the RANSAC threshold); if too few do, all candidates vote.
+PoseEstimate estimate_pose(std::span<const cv::Vec3f> prev_xyz, std::span<const cv::Point2f> cur_px,
+			   std::span<const uint8_t> votes, const geometry::StereoRig &rig, const EgoParams &params,
+			   const MotionPrior *prior = nullptr);
+
+struct GeometricTest {
+	int dof = 0;		 ///< terms evaluated: 0 = no test possible
+	double d1_px = 0;	 ///< eq. 1: distance from the epipolar line
+	double along_px = 0;	 ///< distance from the predicted position along the line
+	double d2_m = 0;	 ///< eq. 4: predicted minus measured depth (0 when no depth at frame n)
+	double statistic = 0;	 ///< the normalised sum of squares
+	bool moving = false;	 ///< statistic above the chi-square gate for `dof`
+	cv::Point2f predicted{}; ///< where a static point would be in frame n (NaN when unknown)
+};
+
+/// Inputs of the per-point test that stay the same for a whole frame pair.
+struct GeometricContext {
+	geometry::StereoRig rig;
+	geometry::Pose curr_from_prev;
+	cv::Matx33d fundamental; ///< from the pose; all zeros when the camera did not translate
+	double disparity_sigma_px = 0.3;
+	EgoParams params;
+	[[nodiscard]] static GeometricContext make(const geometry::StereoRig &rig, const geometry::Pose &curr_from_prev,
+						   double disparity_sigma_px, const EgoParams &params);
+};
+
+/// The test for one match: prev pixel (and its 3D point when measured), cur pixel (and its measured depth,
+/// NaN when none).
+GeometricTest geometric_test(const GeometricContext &context, cv::Point2f prev_px, const cv::Vec3f &prev_xyz,
+			     cv::Point2f cur_px, float cur_depth_m);
+
+/// The chi-square quantile for 1-3 degrees of freedom at probability p (0.95, 0.99 or 0.999).
+double chi2_quantile(int dof, double p);
+
+} // namespace stereod::vision

@@ -1,0 +1,68 @@
+#pragma once
+// Sparse stereo on rectified images (seed 002 section 3.1): each left keypoint is matched to a right keypoint
+// under four constraints, then its disparity is refined to a fraction of a pixel along the row:
+//   scale      the two keypoints come from the same or an adjacent pyramid level (size ratio)
+//   epipolar   rectified rows agree: |v_left - v_right| <= max_row_diff_px
+//   disparity  d = u_left - u_right within [min_disparity_px, max_disparity_px]
+//   two-way    the right keypoint's best left match is the same left keypoint (and Lowe's ratio holds)
+// Sub-pixel: sum of absolute differences of a window around the left point against the right image at
+// integer disparities d0 - r .. d0 + r, the minimum, and the equiangular (V) fit through it and its neighbours.
+// The depth is then z = f b / d (geometry/rig.hpp).
+#include <cstdint>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "core/geometry/rig.hpp"
+#include "core/vision/features.hpp"
+
+namespace stereod::vision {
+
+struct StereoParams {
+	bool enabled = true;		 ///< match the right eye when the source is stereo and calibrated
+	double max_row_diff_px = 1.0;	 ///< epipolar constraint on rectified rows
+	double min_disparity_px = 0.5;	 ///< farther than f b / this is treated as unmeasurable
+	double max_disparity_px = 192;	 ///< nearest measurable: f b / this
+	double max_size_ratio = 0;	 ///< scale constraint; 0 = one pyramid step of the detector (plus 5 %)
+	float ratio = 0.9F;		 ///< Lowe's ratio among the candidates in the band
+	int max_distance = 64;		 ///< descriptor distance limit (Hamming bits for ORB)
+	int refine_radius_px = 2;	 ///< sub-pixel search around the matched disparity
+	int window_radius_px = 5;	 ///< SAD window half-size (11 x 11)
+	double disparity_sigma_px = 0.3; ///< disparity noise after refinement, for depth uncertainty
+	/// Calibration health: a wider band (this many rows) is searched too, to see how many best matches fall
+	/// outside the epipolar band and how far rows disagree.
+	double health_band_px = 8.0;
+};
+
+/// Per left keypoint: its disparity and 3D point, or NaN where it has none.
+struct StereoDepth {
+	std::vector<float> disparity;	    ///< pixels, refined; NaN = not matched
+	std::vector<cv::Vec3f> xyz;	    ///< left camera, metres; NaN where disparity is
+	std::vector<int> right_index;	    ///< matched right keypoint, -1 = none
+	int matched = 0;		    ///< left keypoints with a depth
+	int candidates = 0;		    ///< left keypoints with any descriptor match inside the health band
+	int outside_band = 0;		    ///< of those, best match outside the epipolar band (miscalibration)
+	std::vector<float> row_differences; ///< v_left - v_right of the accepted matches (row_offset)
+};
+
+/// Matches left to right features (both from extract_features on the rectified images) and measures depth.
+/// `left_grey`/`right_grey` are the rectified 8-bit images the keypoints were found in.
+StereoDepth match_stereo(const FrameFeatures &left, const FrameFeatures &right, const cv::Mat &left_grey,
+			 const cv::Mat &right_grey, const geometry::StereoRig &rig, const StereoParams &params,
+			 double detector_scale_step);
+
+/// Sub-pixel disparity at integer pixel (x, y) of the left image near `disparity_px`: the SAD minimum over
+/// integer disparities within `radius` and a V fit through its neighbours. NaN when the window leaves an
+/// image or the minimum lies on the search edge (the match was wrong by more than the radius).
+float refine_disparity(const cv::Mat &left_grey, const cv::Mat &right_grey, cv::Point2f left_pt, float disparity_px,
+		       int radius, int window_radius);
+
+/// Calibration health: v_left - v_right at a stereo match, to a fraction of a pixel (the SAD minimum over
+/// rows -2..2 of the right image at the matched disparity, and a V fit). NaN near the image border.
+float row_offset(const cv::Mat &left_grey, const cv::Mat &right_grey, cv::Point2f left_pt, float disparity_px,
+		 int window_radius);
+
+/// Median of the values (copied); NaN for none.
+float median_of(std::vector<float> values);
+
+} // namespace stereod::vision

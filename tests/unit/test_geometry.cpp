@@ -1,0 +1,270 @@
+// Known answers for the stereo geometry: triangulation, sparse stereo on constructed images, PnP on
+// constructed points, seed 001's eq. 1 and eq. 4 on hand-computed cases, the motion prior.
+#include <random>
+
+#include <gtest/gtest.h>
+#include <opencv2/imgproc.hpp>
+
+#include "core/geometry/rig.hpp"
+#include "core/vision/ego.hpp"
+#include "core/vision/features.hpp"
+#include "core/vision/matching.hpp"
+#include "core/vision/stereo.hpp"
+
+using namespace stereod;
+using namespace stereod::vision;
+
+namespace {
+
+const geometry::StereoRig kRig{800, 800, 320, 240, 0.1};
+
+/// Random texture, smoothed so features and SAD windows have structure at a few pixels.
+cv::Mat texture(int width, int height, uint64_t seed)
+{
+	cv::Mat noise(height, width, CV_8UC1);
+	cv::theRNG().state = seed;
+	cv::randu(noise, 0, 255);
+	cv::Mat smooth;
+	cv::GaussianBlur(noise, smooth, cv::Size(0, 0), 1.5);
+	cv::normalize(smooth, smooth, 0, 255, cv::NORM_MINMAX);
+	return smooth;
+}
+
+/// The right view of a fronto-parallel plane at disparity d: the left image shifted left by d pixels
+/// (sub-pixel by bilinear warp).
+cv::Mat shifted(const cv::Mat &left, double d)
+{
+	cv::Mat right;
+	const cv::Matx23d shift(1, 0, -d, 0, 1, 0);
+	cv::warpAffine(left, right, shift, left.size(), cv::INTER_LINEAR, cv::BORDER_REFLECT_101);
+	return right;
+}
+
+} // namespace
+
+TEST(Geometry, TriangulatesAndProjectsBack)
+{
+	// z = f b / d = 800 * 0.1 / 16 = 5 m; x = (u - cx) z / f = (400 - 320) * 5 / 800 = 0.5 m.
+	const auto p = kRig.triangulate(400, 200, 16);
+	ASSERT_TRUE(p.has_value());
+	EXPECT_NEAR((*p)[0], 0.5, 1e-12);
+	EXPECT_NEAR((*p)[1], -0.25, 1e-12);
+	EXPECT_NEAR((*p)[2], 5.0, 1e-12);
+	const auto back = kRig.project(*p);
+	ASSERT_TRUE(back.has_value());
+	EXPECT_NEAR(back->x, 400, 1e-9);
+	EXPECT_NEAR(back->y, 200, 1e-9);
+	EXPECT_FALSE(kRig.triangulate(400, 200, 0).has_value());
+	EXPECT_FALSE(kRig.triangulate(400, 200, -3).has_value());
+	EXPECT_FALSE(kRig.project(cv::Vec3d(1, 1, -2)).has_value());
+	// dz = z^2 / (f b) * sigma_d = 25 / 80 * 0.5
+	EXPECT_NEAR(kRig.depth_sigma(5, 0.5), 0.15625, 1e-12);
+}
+
+TEST(Geometry, PosesComposeInvertAndRoundTripQuaternions)
+{
+	geometry::Pose a{geometry::rotation_from_vector({0.1, -0.2, 0.3}), {1, 2, 3}};
+	const geometry::Pose identity = a * a.inverse();
+	EXPECT_NEAR(identity.angle(), 0, 1e-12);
+	EXPECT_NEAR(a.angle(), std::sqrt(0.01 + 0.04 + 0.09), 1e-12);
+	EXPECT_NEAR(identity.distance(), 0, 1e-12);
+	const auto q = geometry::quaternion_from_rotation(a.r);
+	const cv::Matx33d back = geometry::rotation_from_quaternion(q[0], q[1], q[2], q[3]);
+	EXPECT_LT(cv::norm(back - a.r), 1e-12);
+	EXPECT_EQ(geometry::Pose::from_matrix(a.matrix()).t, a.t);
+	// A half turn about x: quaternion (1, 0, 0, 0).
+	const auto half = geometry::quaternion_from_rotation(geometry::rotation_from_vector({CV_PI, 0, 0}));
+	EXPECT_NEAR(std::abs(half[0]), 1, 1e-12);
+	EXPECT_THROW(geometry::rotation_from_quaternion(0, 0, 0, 0), std::invalid_argument);
+}
+
+TEST(Geometry, EpipolarDistanceByHand)
+{
+	// Camera moves 1 m along x, no rotation, K = identity-like with f = 1, c = 0: F = [t]x, the epipolar line
+	// of x_a = (0, 0) is y = 0 (the image rows); a point at (5, 3) is 3 away from it.
+	const cv::Matx33d k = cv::Matx33d::eye();
+	geometry::Pose b_from_a;
+	b_from_a.t = {1, 0, 0};
+	const cv::Matx33d f = geometry::fundamental_from_pose(k, b_from_a);
+	EXPECT_NEAR(geometry::epipolar_distance(f, {0, 0}, {5, 3}), 3.0, 1e-12);
+	EXPECT_NEAR(geometry::epipolar_distance(f, {2, 1}, {7, 1}), 0.0, 1e-12);
+	// No translation: no epipolar geometry.
+	EXPECT_TRUE(std::isinf(
+		geometry::epipolar_distance(geometry::fundamental_from_pose(k, geometry::Pose{}), {1, 1}, {2, 2})));
+}
+
+TEST(Geometry, SeedEquationsOneAndFourByHand)
+{
+	// The camera walks 0.1 m forward (x_curr = x_prev - t for a static point: t = (0, 0, -0.1)).
+	EgoParams params;
+	params.pixel_sigma_px = 1.0;
+	params.chi2_quantile = 0.99;
+	geometry::Pose curr_from_prev;
+	curr_from_prev.t = {0, 0, -0.1};
+	const GeometricContext context = GeometricContext::make(kRig, curr_from_prev, 0.3, params);
+	// A static point 4 m ahead, 1 m right: at frame n-1 it is at u = 320 + 800 * 1 / 4 = 520; at frame n
+	// at 3.9 m: u = 320 + 800 / 3.9 = 525.128..., depth 3.9 m.
+	const cv::Vec3f prev_xyz(1, 0, 4);
+	const cv::Point2f prev_px(520, 240);
+	const cv::Point2f cur_px(static_cast<float>(320 + 800 / 3.9), 240);
+	const GeometricTest still = geometric_test(context, prev_px, prev_xyz, cur_px, 3.9F);
+	EXPECT_EQ(still.dof, 3);
+	EXPECT_NEAR(still.d1_px, 0, 1e-3);
+	EXPECT_NEAR(still.d2_m, 0, 1e-6); // eq. 4: Z_pred - Z_meas = 3.9 - 3.9
+	EXPECT_FALSE(still.moving);
+
+	// The same pixels, but the depth now measured 3.5 m: the point came 0.4 m nearer than the camera's walk
+	// explains (a person walking at the camera). Eq. 4: d2 = 3.9 - 3.5 = 0.4 m; the depth noise at 3.9 and
+	// 3.5 m with 0.3 px disparity noise is 3.9^2/80*0.3 = 0.0570 and 3.5^2/80*0.3 = 0.0459, so
+	// (0.4)^2 / (0.0570^2 + 0.0459^2) = 29.9, far above chi2(3 dof, 99%) = 11.3.
+	const GeometricTest toward = geometric_test(context, prev_px, prev_xyz, cur_px, 3.5F);
+	EXPECT_NEAR(toward.d2_m, 0.4, 1e-6);
+	EXPECT_NEAR(toward.statistic, 0.16 / (0.057037 * 0.057037 + 0.0459375 * 0.0459375), 0.05);
+	EXPECT_TRUE(toward.moving);
+
+	// Moved 5 px down (across the epipolar line, which is the row here): eq. 1 gives d1 = 5 px;
+	// 5^2 / (2 * 1^2) = 12.5 alone passes the 1-dof gate 6.63.
+	const GeometricTest sideways = geometric_test(context, prev_px, prev_xyz, cur_px + cv::Point2f(0, 5), 3.9F);
+	EXPECT_NEAR(sideways.d1_px, 5, 1e-3);
+	EXPECT_TRUE(sideways.moving);
+
+	// Without depth at frame n-1, only eq. 1 can be evaluated.
+	const cv::Vec3f unknown(NAN, NAN, NAN);
+	const GeometricTest d1_only = geometric_test(context, prev_px, unknown, cur_px + cv::Point2f(0, 5), NAN);
+	EXPECT_EQ(d1_only.dof, 1);
+	EXPECT_TRUE(d1_only.moving);
+	EXPECT_FALSE(geometric_test(context, prev_px, unknown, cur_px, NAN).moving);
+}
+
+TEST(Geometry, ChiSquareQuantilesAreClose)
+{
+	EXPECT_NEAR(chi2_quantile(1, 0.99), 6.635, 0.15);
+	EXPECT_NEAR(chi2_quantile(2, 0.99), 9.210, 0.1);
+	EXPECT_NEAR(chi2_quantile(3, 0.99), 11.345, 0.1);
+	EXPECT_NEAR(chi2_quantile(3, 0.95), 7.815, 0.1);
+}
+
+TEST(Geometry, PnpRecoversAKnownPoseDespiteOutliers)
+{
+	geometry::Pose truth{geometry::rotation_from_vector({0.01, -0.02, 0.005}), {0.03, -0.01, 0.05}};
+	std::mt19937 rng(7);
+	std::uniform_real_distribution<double> unit(0, 1);
+	std::vector<cv::Vec3f> xyz;
+	std::vector<cv::Point2f> px;
+	for (int i = 0; i < 300; ++i) {
+		const double z = 2 + 20 * unit(rng);
+		const auto p = *kRig.triangulate(unit(rng) * 639, unit(rng) * 479, kRig.fx * kRig.baseline_m / z);
+		auto q = *kRig.project(truth * p);
+		if (i % 4 == 0) // a quarter move on their own: a mover
+			q += cv::Point2d(15 + 10 * unit(rng), -8);
+		xyz.emplace_back(p);
+		px.emplace_back(q);
+	}
+	std::vector<uint8_t> votes(xyz.size(), 1);
+	const PoseEstimate e = estimate_pose(xyz, px, votes, kRig, EgoParams{});
+	ASSERT_TRUE(e.valid) << e.reason;
+	EXPECT_NEAR(e.inliers, 225, 3);
+	EXPECT_LT(cv::norm(e.curr_from_prev.t - truth.t), 1e-4);
+	EXPECT_LT((e.curr_from_prev.inverse() * truth).angle(), 1e-5);
+	for (size_t i = 0; i < xyz.size(); i += 4)
+		EXPECT_EQ(e.inlier_mask[i], 0) << "the mover's point " << i << " voted";
+
+	// Too few points with depth: not valid, and why.
+	const PoseEstimate few = estimate_pose(std::span(xyz).first(5), std::span(px).first(5), votes, kRig, {});
+	EXPECT_FALSE(few.valid);
+	EXPECT_NE(few.reason.find("only 5"), std::string::npos);
+}
+
+TEST(Geometry, MotionPriorRefusesWhatNoAccelerationExplains)
+{
+	// Far points cannot tell a turn from a sideways step; a near mover holds most of the points. Without
+	// a prior RANSAC takes "the camera followed the mover"; the prior (the camera was still) refuses it.
+	geometry::Pose truth; // the camera stands still
+	std::vector<cv::Vec3f> xyz;
+	std::vector<cv::Point2f> px;
+	std::mt19937 rng(3);
+	std::uniform_real_distribution<double> unit(0, 1);
+	for (int i = 0; i < 240; ++i) {
+		const bool mover = i < 150;
+		const double z = mover ? 2.5 + 0.3 * unit(rng) : (i < 220 ? 40 + 20 * unit(rng) : 4 + 4 * unit(rng));
+		const double u = mover ? 100 + 120 * unit(rng) : unit(rng) * 639;
+		const auto p = *kRig.triangulate(u, unit(rng) * 479, kRig.fx * kRig.baseline_m / z);
+		cv::Vec3d moved = p;
+		if (mover)
+			moved += cv::Vec3d(0.05, 0, 0); // 5 cm sideways in one frame: 1.5 m/s
+		xyz.emplace_back(p);
+		px.emplace_back(*kRig.project(truth * moved));
+	}
+	std::vector<uint8_t> votes(xyz.size(), 1);
+	EgoParams params;
+	const PoseEstimate blind = estimate_pose(xyz, px, votes, kRig, params);
+	ASSERT_TRUE(blind.valid);
+	EXPECT_GT(cv::norm(blind.curr_from_prev.t), 0.02) << "the scene was meant to fool a prior-free RANSAC";
+	const MotionPrior prior = MotionPrior::constant_velocity(geometry::Pose{}, 1 / 30.0, 1 / 30.0, params);
+	EXPECT_NEAR(prior.translation_tolerance_m, 10.0 / 900, 1e-9);
+	const PoseEstimate told = estimate_pose(xyz, px, votes, kRig, params, &prior);
+	ASSERT_TRUE(told.valid) << told.reason;
+	EXPECT_LT(cv::norm(told.curr_from_prev.t), 0.003);
+	EXPECT_EQ(told.inlier_mask[0], 0);
+}
+
+TEST(Stereo, RefinesDisparityToAFractionOfAPixel)
+{
+	const cv::Mat left = texture(200, 100, 11);
+	for (double d : {7.0, 7.25, 7.5, 12.8}) {
+		const cv::Mat right = shifted(left, d);
+		const float refined = refine_disparity(left, right, {100, 50}, static_cast<float>(std::round(d)), 2, 5);
+		EXPECT_NEAR(refined, d, 0.12) << "true disparity " << d;
+	}
+	// Off by more than the search radius: the minimum sits on the edge and the match is refused.
+	const cv::Mat right = shifted(left, 20);
+	EXPECT_TRUE(std::isnan(refine_disparity(left, right, {100, 50}, 10, 2, 5)));
+	// Near the border: no window.
+	EXPECT_TRUE(std::isnan(refine_disparity(left, right, {2, 50}, 10, 2, 5)));
+}
+
+TEST(Stereo, MatchesConstructedPairAndMeasuresDepthAndRowHealth)
+{
+	const cv::Mat left = texture(640, 480, 5);
+	const double d = 16.4; // 800 * 0.1 / 16.4 = 4.878 m
+	const cv::Mat right = shifted(left, d);
+	FeatureParams fp;
+	fp.max_features = 500;
+	const FrameFeatures lf = extract_features(left, fp, 1);
+	const FrameFeatures rf = extract_features(right, fp, 1);
+	const StereoDepth depth = match_stereo(lf, rf, left, right, kRig, StereoParams{}, fp.orb_scale);
+	EXPECT_GT(depth.matched, 150);
+	int within = 0;
+	for (size_t i = 0; i < depth.disparity.size(); ++i) {
+		if (std::isnan(depth.disparity[i]))
+			continue;
+		within += std::abs(depth.disparity[i] - d) < 0.25 ? 1 : 0;
+		EXPECT_NEAR(depth.xyz[i][2], kRig.depth(depth.disparity[i]), 1e-3);
+	}
+	EXPECT_GT(within, depth.matched * 9 / 10);
+	EXPECT_NEAR(median_of(depth.row_differences), 0, 0.1);
+	EXPECT_LT(depth.outside_band, depth.candidates / 20 + 1);
+
+	// A rig whose right camera dropped 2.3 rows: the row health shows it, and matches leave the band.
+	cv::Mat dropped;
+	cv::warpAffine(left, dropped, cv::Matx23d(1, 0, -d, 0, 1, 2.3), left.size(), cv::INTER_LINEAR,
+		       cv::BORDER_REFLECT_101);
+	const FrameFeatures df = extract_features(dropped, fp, 1);
+	const StereoDepth bumped = match_stereo(lf, df, left, dropped, kRig, StereoParams{}, fp.orb_scale);
+	EXPECT_GT(bumped.outside_band, bumped.candidates / 2);
+}
+
+TEST(Matching, LucasKanadeRefinesToSubpixel)
+{
+	const cv::Mat prev = texture(320, 240, 9);
+	cv::Mat cur;
+	cv::warpAffine(prev, cur, cv::Matx23d(1, 0, 3.4, 0, 1, -1.7), prev.size(), cv::INTER_LINEAR,
+		       cv::BORDER_REFLECT_101);
+	const std::vector<cv::Point2f> from = {{100, 100}, {200, 150}, {60, 180}};
+	std::vector<cv::Point2f> to = {{103, 98}, {203, 148}, {63, 178}}; // keypoint positions, whole pixels
+	EXPECT_EQ(refine_matches(prev, cur, from, to, MatchParams{}), 3);
+	for (size_t i = 0; i < from.size(); ++i) {
+		EXPECT_NEAR(to[i].x - from[i].x, 3.4, 0.08);
+		EXPECT_NEAR(to[i].y - from[i].y, -1.7, 0.08);
+	}
+}
