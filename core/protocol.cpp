@@ -224,6 +224,11 @@ std::string status_message(const StatusReport &status)
 	};
 	if (!status.device.empty())
 		message["device"] = status.device;
+	if (status.stereo)
+		message["stereo"] = {{"frames", status.stereo->frames},
+				     {"row_diff_px", round_to(status.stereo->row_diff_px, 0.001)},
+				     {"outside_band_fraction", round_to(status.stereo->outside_band_fraction, 0.0001)},
+				     {"drifted", status.stereo->drifted}};
 	return message.dump();
 }
 

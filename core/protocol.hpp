@@ -3,6 +3,7 @@
 // build strings and parse them, the socket and file writers live elsewhere.
 #include <cstdint>
 #include <map>
+#include <optional>
 #include <string>
 
 #include <nlohmann/json_fwd.hpp>
@@ -40,6 +41,14 @@ struct StatusReport {
 	std::map<std::string, int64_t> device; ///< the capture device's own statistics (cameras only)
 	LatencySummary capture_to_publish;
 	size_t clients = 0;
+	/// Stereo sources: the calibration's health (running means over ~30 frames).
+	struct StereoHealth {
+		uint64_t frames = 0;
+		double row_diff_px = 0;
+		double outside_band_fraction = 0;
+		bool drifted = false;
+	};
+	std::optional<StereoHealth> stereo;
 };
 
 std::string status_message(const StatusReport &status);

@@ -117,6 +117,7 @@ protocol::StatusReport make_status(const Pipeline &pipeline, const PipelineStats
 	report.drops["clients_refused"] = server.clients_refused;
 	report.clients = server.clients;
 	report.capture_to_publish = s.capture_to_publish;
+	report.stereo = s.stereo;
 	return report;
 }
 
@@ -219,12 +220,26 @@ int run_daemon(const DaemonConfig &config)
 	int64_t next_status_ns = start_ns + static_cast<int64_t>(config.output.status_interval_s * 1e9);
 	int64_t next_log_ns = start_ns + 10'000'000'000;
 	RateMeter meter;
+	bool calibration_warned = false;
 	auto emit_status = [&] {
 		const SocketServerStats server_stats = server.stats();
 		const PipelineStats s = pipeline.stats();
 		const auto [capture_fps, publish_fps] = meter.update(s.frames_captured, s.frames_published);
 		const auto report = make_status(pipeline, s, server_stats, start_ns, capture_fps, publish_fps);
 		server.publish(protocol::status_message(report));
+		// Said once per crossing, not every status: a bumped rig needs recalibrating, not a flood of lines.
+		const bool drifted = report.stereo && report.stereo->drifted;
+		if (drifted != calibration_warned) {
+			if (drifted)
+				spdlog::warn("stereo calibration drifting: matches differ by {:.2f} px in rows (over "
+					     "0.5 px); "
+					     "{:.1f}% refused by the epipolar band; the rig needs recalibrating",
+					     report.stereo->row_diff_px, 100 * report.stereo->outside_band_fraction);
+			else
+				spdlog::info("stereo calibration back within 0.5 px ({:.2f} px)",
+					     report.stereo ? report.stereo->row_diff_px : 0.0);
+			calibration_warned = drifted;
+		}
 		return report;
 	};
 	for (;;) {

@@ -531,6 +531,19 @@ const std::vector<Option> &options()
 			"ego", "ransac_threshold_px", "PnP RANSAC inlier distance",
 			[](DaemonConfig &c) -> double & { return c.motion.ego.ransac_threshold_px; }, 0.1, 50));
 		o.push_back(number(
+			"ego", "ransac_iterations", "P3P samples drawn per frame (up to four hypotheses each)",
+			[](DaemonConfig &c) -> int & { return c.motion.ego.ransac_iterations; }, 1, 100000));
+		o.push_back(number(
+			"ego", "max_depth_m", "farther points do not vote for the pose",
+			[](DaemonConfig &c) -> double & { return c.motion.ego.max_depth_m; }, 0.1, 100000));
+		o.push_back(number(
+			"ego", "max_acceleration_mps2", "motion prior: the camera's largest acceleration; 0 = no prior",
+			[](DaemonConfig &c) -> double & { return c.motion.ego.max_acceleration_mps2; }, 0, 10000));
+		o.push_back(number(
+			"ego", "max_angular_acceleration_radps2", "motion prior: the largest angular acceleration",
+			[](DaemonConfig &c) -> double & { return c.motion.ego.max_angular_acceleration_radps2; }, 0,
+			10000));
+		o.push_back(number(
 			"ego", "min_inliers", "fewer: the pose is not trusted (ego.valid false)",
 			[](DaemonConfig &c) -> int & { return c.motion.ego.min_inliers; }, 6, 100000));
 		o.push_back(number(
@@ -542,6 +555,13 @@ const std::vector<Option> &options()
 		o.push_back(number(
 			"ego", "confirm_frames", "frames in a row a point must fail the test to be dynamic",
 			[](DaemonConfig &c) -> int & { return c.motion.ego.confirm_frames; }, 1, 100));
+		o.push_back(number(
+			"ego", "min_parallax_px",
+			"combined: points the translation moves less than this keep seed 000's label",
+			[](DaemonConfig &c) -> double & { return c.motion.ego.min_parallax_px; }, 0, 1000));
+		o.push_back(number(
+			"ego", "anchor_min_frames", "anchored depth test after this many frames of a track; 0 = off",
+			[](DaemonConfig &c) -> int & { return c.motion.ego.anchor_min_frames; }, 0, 100000));
 		o.push_back(boolean("ego", "depth_check", "test the depth measured at frame n (seed 001 eq. 4)",
 				    [](DaemonConfig &c) -> bool & { return c.motion.ego.depth_check; }));
 		o.push_back(boolean("ego", "along_line",

@@ -71,6 +71,10 @@ PipelineStats Pipeline::stats() const
 		std::lock_guard lock(state_mutex_);
 		s.source_state = state_;
 		s.capture_to_publish = latency_.summary();
+		if (calibration_health_.frames() > 0)
+			s.stereo = protocol::StatusReport::StereoHealth{
+				calibration_health_.frames(), calibration_health_.row_diff_px(),
+				calibration_health_.outside_band_fraction(), calibration_health_.drifted()};
 	}
 	s.frames_captured = captured_.load();
 	s.frames_published = published_.load();
@@ -296,6 +300,8 @@ void Pipeline::publish_loop()
 		{
 			std::lock_guard lock(state_mutex_);
 			latency_.add(result.t_publish_ns - result.t_host_ns);
+			if (result.stereo)
+				calibration_health_.add(*result.stereo);
 		}
 		{
 			std::lock_guard lock(results_mutex_);

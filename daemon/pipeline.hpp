@@ -18,12 +18,14 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
 
 #include "core/frame_pool.hpp"
 #include "core/latency.hpp"
+#include "core/protocol.hpp"
 #include "core/result.hpp"
 #include "core/spsc_ring.hpp"
 #include "core/vision/motion_stages.hpp"
@@ -52,6 +54,7 @@ struct PipelineStats {
 	uint64_t reconnects = 0;
 	uint64_t dropped_at_stop = 0; ///< live backlog left unprocessed when the drain time ran out
 	protocol::LatencySummary capture_to_publish;
+	std::optional<protocol::StatusReport::StereoHealth> stereo; ///< stereo sources: calibration health
 };
 
 class Pipeline
@@ -132,6 +135,7 @@ private:
 	mutable std::mutex state_mutex_;
 	std::string state_ = "starting";
 	LatencyWindow latency_{2048};
+	vision::CalibrationHealth calibration_health_; ///< under state_mutex_
 
 	std::thread capture_thread_, dispatch_thread_, publish_thread_;
 	std::vector<std::thread> workers_;

@@ -1,7 +1,10 @@
 // Benchmark (not a test): the daemon's pipeline on the live sim at its frame rate, capture-to-publish
-// latency percentiles and throughput, with the vision stages off (the spine alone) and on (ORB path).
+// latency percentiles and throughput, with the vision stages off (the spine alone), on the left eye (the
+// monocular ORB path) and on the whole stereo path (both eyes' features, stereo, pose, geometric check).
 #include <cstdio>
+#include <map>
 #include <mutex>
+#include <string>
 #include <thread>
 
 #include <CLI/CLI.hpp>
@@ -19,24 +22,28 @@ struct Run {
 	protocol::LatencySummary latency;
 	double fps = 0;
 	daemon::PipelineStats stats;
-	double extract_ms = 0, match_ms = 0, classify_ms = 0;
+	std::map<std::string, double> stage_ms; ///< mean per published frame
 };
 
-Run run(const drivers::SourceConfig &source_config, bool vision, double seconds, size_t workers)
+enum class Path { Spine, Mono, Stereo };
+
+Run run(const drivers::SourceConfig &source_config, Path path, double seconds, size_t workers)
 {
 	auto source = drivers::SourceRegistry::with_builtin_drivers().create(source_config);
 	daemon::PipelineOptions options;
 	options.workers = workers;
 	options.overflow = OverflowPolicy::DropOldest;
-	options.motion.enabled = vision;
+	options.motion.enabled = path != Path::Spine;
+	if (path == Path::Stereo)
+		options.motion.rig = source->info().calibration; // both eyes' features, stereo, pose, geometric check
 	std::mutex m;
 	std::vector<int64_t> latencies;
-	double extract = 0, match = 0, classify = 0;
+	std::map<std::string, double> stages;
 	daemon::Pipeline pipeline(std::move(source), options, [&](FrameResult &r) {
 		std::lock_guard lock(m);
 		latencies.push_back(r.t_publish_ns - r.t_host_ns);
 		for (const auto &t : r.timing)
-			(t.name == "extract" ? extract : t.name == "match" ? match : classify) += t.ms;
+			stages[t.name] += t.ms;
 	});
 	pipeline.start();
 	std::this_thread::sleep_for(std::chrono::duration<double>(seconds));
@@ -47,16 +54,23 @@ Run run(const drivers::SourceConfig &source_config, bool vision, double seconds,
 	out.latency = summarize_ns(latencies);
 	out.fps = static_cast<double>(latencies.size()) / seconds;
 	const double n = std::max<double>(1, static_cast<double>(latencies.size()));
-	out.extract_ms = extract / n, out.match_ms = match / n, out.classify_ms = classify / n;
+	for (const auto &[name, ms] : stages)
+		out.stage_ms[name] = ms / n;
 	return out;
 }
 
 void row(const char *name, const Run &r)
 {
-	std::printf("| %-28s | %6.1f | %7.2f | %7.2f | %7.2f | %7.2f | %6llu | %6llu | %6.2f | %6.2f | %6.2f |\n", name,
-		    r.fps, r.latency.p50_ms, r.latency.p90_ms, r.latency.p99_ms, r.latency.max_ms,
+	const auto stage = [&](const char *key) {
+		const auto it = r.stage_ms.find(key);
+		return it == r.stage_ms.end() ? 0.0 : it->second;
+	};
+	std::printf("| %-28s | %6.1f | %7.2f | %7.2f | %7.2f | %7.2f | %6llu | %6llu | %6.2f | %6.2f | %6.2f | %6.2f | "
+		    "%6.2f |\n",
+		    name, r.fps, r.latency.p50_ms, r.latency.p90_ms, r.latency.p99_ms, r.latency.max_ms,
 		    static_cast<unsigned long long>(r.stats.ring_evicted),
-		    static_cast<unsigned long long>(r.stats.pool_exhausted), r.extract_ms, r.match_ms, r.classify_ms);
+		    static_cast<unsigned long long>(r.stats.pool_exhausted), stage("extract"), stage("stereo"),
+		    stage("match") + stage("subpixel"), stage("classify"), stage("pose"));
 }
 
 } // namespace
@@ -86,11 +100,13 @@ int main(int argc, char **argv)
 	config.sim.scene = scene;
 	std::printf("sim '%s' %dx%d stereo at %.0f fps, %zu workers, %.0f s per run, drop-oldest\n\n", scene.c_str(),
 		    width, height, fps, workers, seconds);
-	std::printf("| %-28s | %6s | %7s | %7s | %7s | %7s | %6s | %6s | %6s | %6s | %6s |\n", "pipeline", "fps",
-		    "p50 ms", "p90 ms", "p99 ms", "max ms", "ring", "pool", "extr.", "match", "class.");
-	std::printf("|---|---|---|---|---|---|---|---|---|---|---|\n");
-	row("spine only (vision off)", run(config, false, seconds, workers));
-	row("ORB + seed-000 classifier", run(config, true, seconds, workers));
+	std::printf("| %-28s | %6s | %7s | %7s | %7s | %7s | %6s | %6s | %6s | %6s | %6s | %6s | %6s |\n", "pipeline",
+		    "fps", "p50 ms", "p90 ms", "p99 ms", "max ms", "ring", "pool", "extr.", "stereo", "match", "class.",
+		    "pose");
+	std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+	row("spine only (vision off)", run(config, Path::Spine, seconds, workers));
+	row("ORB + seed-000 (left eye)", run(config, Path::Mono, seconds, workers));
+	row("stereo: both eyes, pose", run(config, Path::Stereo, seconds, workers));
 	std::printf("\nlatency = t_publish - t_host (capture complete on the host -> message handed to the socket);\n"
 		    "ring/pool = frames dropped by drop-oldest / for want of a free frame; stage columns: mean ms per "
 		    "frame.\n");

@@ -223,6 +223,19 @@ PoseEstimate estimate_pose(std::span<const cv::Vec3f> prev_xyz, std::span<const 
 	return out;
 }
 
+double anchored_depth_statistic(const cv::Vec3f &anchor_world, float anchor_sigma_m,
+				const geometry::Pose &camera_from_world, float cur_depth_m, double cur_sigma_m)
+{
+	if (!std::isfinite(anchor_world[0]) || !std::isfinite(cur_depth_m) || !(cur_depth_m > 0))
+		return std::numeric_limits<double>::quiet_NaN();
+	const cv::Vec3d seen = camera_from_world * cv::Vec3d(anchor_world[0], anchor_world[1], anchor_world[2]);
+	if (!(seen[2] > 0))
+		return std::numeric_limits<double>::quiet_NaN();
+	const double d = seen[2] - cur_depth_m;
+	const double var = static_cast<double>(anchor_sigma_m) * anchor_sigma_m + cur_sigma_m * cur_sigma_m;
+	return var > 0 ? d * d / var : std::numeric_limits<double>::quiet_NaN();
+}
+
 GeometricContext GeometricContext::make(const geometry::StereoRig &rig, const geometry::Pose &curr_from_prev,
 					double disparity_sigma_px, const EgoParams &params)
 {

@@ -41,6 +41,17 @@ struct EgoParams {
 	/// (until then it is uncertain): a one-frame failure is usually a mismatch or a stereo error at an
 	/// occlusion edge, a mover keeps failing. 1 = every frame alone, as the seed.
 	int confirm_frames = 2;
+	/// Combined labels: a point whose parallax (the pose's prediction against the rotation's alone) is under
+	/// this keeps seed 000's label: there the translation is poorly determined and the homography better.
+	/// Off by default: measured, it cost the walk more than it gained elsewhere (docs/geometry.md).
+	double min_parallax_px = 0;
+	/// The anchored depth test: a followed point's depth against where its first measured position, carried
+	/// by the camera's motion since, puts it. Tested once the track is this many frames old (the noise of one
+	/// measurement at each end does not grow with time, a walker's drift does); 0 = off, the default: it
+	/// finds some of the walker heading at the camera, but a background point whose stereo window a passing
+	/// mover's edge enters fails it too (docs/geometry.md has both figures). 6 is a useful value to try.
+	int anchor_min_frames = 0;
+	int anchor_max_frames = 90; ///< re-anchored after this many (the chained pose drifts slowly)
 	/// Motion prior: the camera keeps its velocity within these accelerations between frames. Only points
 	/// the predicted motion explains within what the accelerations allow may vote. Without it a near,
 	/// well-textured mover can win RANSAC: far points cannot tell a turn from a sideways step, so "the
@@ -103,6 +114,12 @@ struct GeometricContext {
 /// NaN when none).
 GeometricTest geometric_test(const GeometricContext &context, cv::Point2f prev_px, const cv::Vec3f &prev_xyz,
 			     cv::Point2f cur_px, float cur_depth_m);
+
+/// The anchored depth test: `anchor_world` (the point in the world when its track began, its depth noise
+/// `anchor_sigma_m`) seen from the current camera (`camera_from_world`) against the depth measured now.
+/// Returns the normalised squared depth difference (1 degree of freedom); NaN when either depth is missing.
+double anchored_depth_statistic(const cv::Vec3f &anchor_world, float anchor_sigma_m,
+				const geometry::Pose &camera_from_world, float cur_depth_m, double cur_sigma_m);
 
 /// The chi-square quantile for 1-3 degrees of freedom at probability p (0.95, 0.99 or 0.999).
 double chi2_quantile(int dof, double p);

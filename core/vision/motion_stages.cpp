@@ -68,6 +68,55 @@ void fill_pose(EgoMotion &ego, const geometry::Pose *prev_from_curr, const geome
 	ego.t_world_curr = world_from_curr.matrix();
 }
 
+/// The anchored depth test (docs/geometry.md): each followed point's depth against its track's first
+/// measured position carried by the camera's motion since; points that drifted are dynamic. New tracks, and
+/// old anchors, are (re-)anchored from this frame's depth.
+void anchor_tracks(TrackSet &tracks, std::span<const Match> matches, const FrameFeatures &cur,
+		   const geometry::Pose &world_from_curr, Classification &classification,
+		   const geometry::StereoRig &rig, const MotionParams &params, const TrackSet &prev_tracks,
+		   std::vector<uint8_t> &failed)
+{
+	failed.resize(matches.size(), 0);
+	const geometry::Pose curr_from_world = world_from_curr.inverse();
+	const double gate = chi2_quantile(1, params.ego.chi2_quantile);
+	const bool have_texture = classification.texture_agrees.size() == matches.size();
+	for (size_t i = 0; i < matches.size(); ++i) {
+		const auto c = static_cast<size_t>(matches[i].cur);
+		if (c >= tracks.by_keypoint.size() || c >= cur.xyz.size())
+			continue;
+		TrackState &state = tracks.by_keypoint[c];
+		const cv::Vec3f &xyz = cur.xyz[c];
+		const bool has_depth = std::isfinite(xyz[2]) && xyz[2] > 0;
+		const double sigma = has_depth ? rig.depth_sigma(xyz[2], params.stereo.disparity_sigma_px) : 0;
+		const bool anchored = std::isfinite(state.anchor_world[0]);
+		if (!anchored || state.anchor_age > static_cast<uint32_t>(params.ego.anchor_max_frames)) {
+			state.anchor_world = cv::Vec3f(kNaN, kNaN, kNaN);
+			if (has_depth && classification.labels[i] != PointLabel::Dynamic) {
+				const cv::Vec3d w = world_from_curr * cv::Vec3d(xyz[0], xyz[1], xyz[2]);
+				state.anchor_world = cv::Vec3f(static_cast<float>(w[0]), static_cast<float>(w[1]),
+							       static_cast<float>(w[2]));
+				state.anchor_sigma_m = static_cast<float>(sigma);
+				state.anchor_age = 0;
+			}
+			continue;
+		}
+		if (!has_depth || state.anchor_age < static_cast<uint32_t>(params.ego.anchor_min_frames) ||
+		    (have_texture && classification.texture_agrees[i] == 0))
+			continue;
+		const double statistic = anchored_depth_statistic(state.anchor_world, state.anchor_sigma_m,
+								  curr_from_world, xyz[2], sigma);
+		if (!(statistic > gate))
+			continue;
+		// Like the per-frame test, confirmed by a failure in the frame before (ego.confirm_frames).
+		failed[i] = 1;
+		const auto p = static_cast<size_t>(matches[i].prev);
+		const bool failed_before =
+			p < prev_tracks.dynamic_by_keypoint.size() && prev_tracks.dynamic_by_keypoint[p] != 0;
+		if (params.ego.confirm_frames <= 1 || failed_before)
+			classification.labels[i] = PointLabel::Dynamic;
+	}
+}
+
 } // namespace
 
 FrameFeatures extract_stage(const StereoFrame &frame, const MotionParams &params, std::vector<StageTime> &timing)
@@ -205,13 +254,27 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 					geometric_test(context, pairs[i].prev, prev_xyz[i], pairs[i].cur, cur_depth);
 				predicted[i] = test.predicted;
 				const bool has_prev_depth = std::isfinite(prev_xyz[i][2]);
+				// Combined: a point the camera's translation hardly moves (parallax under
+				// ego.min_parallax_px: far, or near the direction of travel) cannot tell the pose from
+				// seed 000's homography, which is fitted to the whole scene at once and is the better
+				// estimate there (a poorly determined translation would explain a mover's motion away).
+				bool low_parallax = false;
+				if (params.label_method == LabelMethod::Combined && has_prev_depth) {
+					const cv::Vec3d p(prev_xyz[i][0], prev_xyz[i][1], prev_xyz[i][2]);
+					const auto moved = params.rig->project(pose->curr_from_prev * p);
+					const auto turned = params.rig->project(pose->curr_from_prev.r * p);
+					low_parallax = params.ego.min_parallax_px > 0 && moved && turned &&
+						       cv::norm(*moved - *turned) < params.ego.min_parallax_px;
+				}
 				PointLabel label =
-					combine(params.label_method, classification.labels[i], test, has_prev_depth,
-						!have_texture || classification.texture_agrees[i] != 0);
+					low_parallax ? classification.labels[i]
+						     : combine(params.label_method, classification.labels[i], test,
+							       has_prev_depth,
+							       !have_texture || classification.texture_agrees[i] != 0);
 				// Seed 000's double texture check (eqs. 6-7) with the pose's prediction: when what the
 				// image now shows where a static point would be looks like the point, the match more
 				// likely jumped to a look-alike (a repeated window) than the point moved.
-				if (label == PointLabel::Dynamic && std::isfinite(test.predicted.x) &&
+				if (!low_parallax && label == PointLabel::Dynamic && std::isfinite(test.predicted.x) &&
 				    test.predicted.x >= 0 && test.predicted.y >= 0 &&
 				    test.predicted.x < static_cast<float>(frame.left.cols) &&
 				    test.predicted.y < static_cast<float>(frame.left.rows) &&
@@ -220,7 +283,7 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 					label = PointLabel::Uncertain;
 				if (test.moving)
 					failed[i] = 1;
-				if (label == PointLabel::Dynamic && params.ego.confirm_frames > 1) {
+				if (!low_parallax && label == PointLabel::Dynamic && params.ego.confirm_frames > 1) {
 					const auto p = static_cast<size_t>(matches[i].prev);
 					const bool failed_before = prev_tracks != nullptr &&
 								   p < prev_tracks->dynamic_by_keypoint.size() &&
@@ -242,6 +305,12 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 		follow.predicted = predicted;
 	TrackSet tracks = follow_tracks(prev_tracks, follow, params.classifier, params.temporal);
 	promote_remembered_movers(classification.labels, matches, tracks, params.classifier, params.temporal);
+	if (pose && pose->valid && params.ego.anchor_min_frames > 0 && params.label_method != LabelMethod::Seed000) {
+		const geometry::Pose world_prev =
+			prev_tracks->world_from_camera ? *prev_tracks->world_from_camera : geometry::Pose{};
+		anchor_tracks(tracks, matches, cur, world_prev * pose->curr_from_prev.inverse(), classification,
+			      *params.rig, params, *prev_tracks, failed);
+	}
 	tracks.dynamic_by_keypoint.assign(cur.keypoints.size(), 0);
 	for (size_t i = 0; i < n; ++i)
 		if (classification.labels[i] == PointLabel::Dynamic || (i < failed.size() && failed[i] != 0))

@@ -90,6 +90,17 @@ struct Best {
 
 } // namespace
 
+void CalibrationHealth::add(const StereoSummary &frame)
+{
+	if (frame.matched < 10 || !std::isfinite(frame.median_row_diff_px))
+		return; // too few matches to say anything about the rig
+	++frames_;
+	const double weight = 1.0 / static_cast<double>(std::min<uint64_t>(frames_, static_cast<uint64_t>(window_)));
+	const double outside = frame.candidates > 0 ? static_cast<double>(frame.outside_band) / frame.candidates : 0;
+	row_diff_px_ += weight * (frame.median_row_diff_px - row_diff_px_);
+	outside_ += weight * (outside - outside_);
+}
+
 float median_of(std::vector<float> values)
 {
 	std::erase_if(values, [](float v) { return !std::isfinite(v); });

@@ -8,6 +8,7 @@
 // Sub-pixel: sum of absolute differences of a window around the left point against the right image at
 // integer disparities d0 - r .. d0 + r, the minimum, and the equiangular (V) fit through it and its neighbours.
 // The depth is then z = f b / d (geometry/rig.hpp).
+#include <cmath>
 #include <cstdint>
 #include <vector>
 
@@ -61,6 +62,31 @@ float refine_disparity(const cv::Mat &left_grey, const cv::Mat &right_grey, cv::
 /// rows -2..2 of the right image at the matched disparity, and a V fit). NaN near the image border.
 float row_offset(const cv::Mat &left_grey, const cv::Mat &right_grey, cv::Point2f left_pt, float disparity_px,
 		 int window_radius);
+
+/// Calibration health over the stream (no peer reports this live): a running mean of each frame's median row
+/// difference of the stereo matches and of the fraction of matches the epipolar band refused. A bumped rig
+/// shows as a row difference growing past half a pixel.
+class CalibrationHealth
+{
+public:
+	/// The mean over the last ~`window` frames (an exponential average after the first `window`).
+	explicit CalibrationHealth(int window = 30) : window_(window) {}
+	void add(const StereoSummary &frame);
+	[[nodiscard]] uint64_t frames() const { return frames_; }
+	[[nodiscard]] double row_diff_px() const { return row_diff_px_; }
+	[[nodiscard]] double outside_band_fraction() const { return outside_; }
+	/// |row difference| beyond the limit (the warning: the rig has drifted out of calibration).
+	[[nodiscard]] bool drifted(double limit_px = 0.5) const
+	{
+		return frames_ >= static_cast<uint64_t>(window_) && std::abs(row_diff_px_) > limit_px;
+	}
+
+private:
+	int window_;
+	uint64_t frames_ = 0;
+	double row_diff_px_ = 0;
+	double outside_ = 0;
+};
 
 /// Median of the values (copied); NaN for none.
 float median_of(std::vector<float> values);

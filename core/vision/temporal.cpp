@@ -52,6 +52,9 @@ TrackSet follow_tracks(const TrackSet *prev, const FollowInput &input, const Cla
 		after.count = static_cast<float>(lambda) * before.count + 1;
 		after.noise_weight = static_cast<float>(lambda * lambda) * before.noise_weight + 1;
 		after.age = before.age + 1;
+		after.anchor_world = before.anchor_world;
+		after.anchor_sigma_m = before.anchor_sigma_m;
+		after.anchor_age = before.anchor_age + 1;
 	}
 	for (auto &state : out.by_keypoint)
 		if (state.id == 0)

@@ -16,6 +16,7 @@
 // differs, or r jumps away from the track's mean own motion by more than the per-frame gate, which is what a
 // mismatch onto a look-alike (a repeated window, say) does.
 #include <cstdint>
+#include <limits>
 #include <optional>
 #include <span>
 #include <vector>
@@ -41,6 +42,13 @@ struct TrackState {
 	float count = 0;	  ///< decayed number of frames summed (R / count: mean own motion per frame)
 	float noise_weight = 0;	  ///< W: decayed sum of squared weights, the noise variance of R over sigma^2
 	uint32_t age = 0;	  ///< frames followed
+	/// Stereo/RGB-D: where the point was in the world when the track's depth was first measured (NaN: not
+	/// anchored), that depth's standard deviation, and frames since. A static point stays where it was; a
+	/// point walking at the camera, or keeping pace with it, drifts from its anchor by more than one frame's
+	/// depth noise can hide (docs/geometry.md, the anchored depth test).
+	cv::Vec3f anchor_world{std::numeric_limits<float>::quiet_NaN(), 0, 0};
+	float anchor_sigma_m = 0;
+	uint32_t anchor_age = 0;
 };
 
 /// The memory of one frame: a state per keypoint of that frame.

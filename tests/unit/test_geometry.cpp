@@ -268,3 +268,36 @@ TEST(Matching, LucasKanadeRefinesToSubpixel)
 		EXPECT_NEAR(to[i].y - from[i].y, -1.7, 0.08);
 	}
 }
+
+TEST(Stereo, CalibrationHealthWarnsPastHalfAPixel)
+{
+	CalibrationHealth health(30);
+	StereoSummary good{500, 300, 320, 4, 0.05F};
+	for (int i = 0; i < 40; ++i)
+		health.add(good);
+	EXPECT_FALSE(health.drifted());
+	EXPECT_NEAR(health.row_diff_px(), 0.05, 1e-6);
+	EXPECT_NEAR(health.outside_band_fraction(), 4.0 / 320, 1e-9);
+	StereoSummary bumped{500, 200, 320, 150, -0.9F};
+	for (int i = 0; i < 60; ++i)
+		health.add(bumped);
+	EXPECT_TRUE(health.drifted());
+	EXPECT_LT(health.row_diff_px(), -0.5);
+	// Frames with too few matches say nothing about the rig.
+	const uint64_t before = health.frames();
+	health.add(StereoSummary{500, 3, 5, 0, 4.0F});
+	EXPECT_EQ(health.frames(), before);
+}
+
+TEST(Geometry, AnchoredDepthByHand)
+{
+	// A point anchored 6 m ahead (sigma 0.1 m); the camera walked 0.5 m forward since: a static point is now
+	// at 5.5 m. Measured 5.5: statistic 0. Measured 5.0 with sigma 0.1: (0.5)^2 / (0.01 + 0.01) = 12.5.
+	geometry::Pose camera_from_world;
+	camera_from_world.t = {0, 0, -0.5};
+	const cv::Vec3f anchor(0.4F, 0.2F, 6.0F);
+	EXPECT_NEAR(anchored_depth_statistic(anchor, 0.1F, camera_from_world, 5.5F, 0.1), 0, 1e-9);
+	EXPECT_NEAR(anchored_depth_statistic(anchor, 0.1F, camera_from_world, 5.0F, 0.1), 12.5, 1e-4);
+	EXPECT_TRUE(std::isnan(anchored_depth_statistic(cv::Vec3f(NAN, 0, 0), 0.1F, camera_from_world, 5.0F, 0.1)));
+	EXPECT_TRUE(std::isnan(anchored_depth_statistic(anchor, 0.1F, camera_from_world, NAN, 0.1)));
+}
