@@ -56,25 +56,15 @@ OverflowPolicy policy_for(const std::string &overflow, bool live)
 	return live ? OverflowPolicy::DropOldest : OverflowPolicy::Block;
 }
 
-/// The truth's camera poses in the TUM format (timestamp tx ty tz qx qy qz qw; the capture time in seconds),
-/// for `stereoctl eval --poses` and any TUM tool.
-void write_truth_poses(const fs::path &path, const std::map<uint64_t, std::string> &truth_lines)
+/// One line of the truth's camera poses in the TUM format (timestamp tx ty tz qx qy qz qw; the capture time in
+/// seconds), for `stereoctl eval --poses` and any TUM tool.
+std::string tum_line(int64_t t_ns, const std::array<double, 12> &world_from_camera)
 {
-	std::ofstream out(path, std::ios::trunc);
-	out << "# the source's true camera poses: world from left camera (x right, y down, z forward), metres\n"
-	       "# timestamp tx ty tz qx qy qz qw\n";
-	for (const auto &[seq, text] : truth_lines) {
-		const auto line = nlohmann::json::parse(text);
-		const auto m = line.at("camera_pose").get<std::array<double, 12>>();
-		cv::Matx33d r;
-		for (int row = 0; row < 3; ++row)
-			for (int col = 0; col < 3; ++col)
-				r(row, col) = m[static_cast<size_t>(row * 4 + col)];
-		const auto q = geometry::quaternion_from_rotation(r);
-		out << fmt::format("{:.9f} {:.9f} {:.9f} {:.9f} {:.9f} {:.9f} {:.9f} {:.9f}\n",
-				   static_cast<double>(line.at("t_capture_ns").get<int64_t>()) * 1e-9, m[3], m[7],
-				   m[11], q[0], q[1], q[2], q[3]);
-	}
+	const auto &m = world_from_camera;
+	const cv::Matx33d r(m[0], m[1], m[2], m[4], m[5], m[6], m[8], m[9], m[10]);
+	const auto q = geometry::quaternion_from_rotation(r);
+	return fmt::format("{:.9f} {:.9f} {:.9f} {:.9f} {:.9f} {:.9f} {:.9f} {:.9f}\n",
+			   static_cast<double>(t_ns) * 1e-9, m[3], m[7], m[11], q[0], q[1], q[2], q[3]);
 }
 
 PipelineOptions pipeline_options(const DaemonConfig &config, const drivers::SourceInfo &info, bool live)
@@ -319,7 +309,7 @@ int run_batch(DaemonConfig config, const BatchOptions &options)
 	if (!options.truth_dir.empty() && !info.geometry.truth)
 		spdlog::warn("--truth-dir: source '{}' has no ground truth; nothing written there", info.name);
 	std::mutex truth_mutex;
-	std::map<uint64_t, std::string> truth_lines;
+	std::map<uint64_t, std::string> truth_lines, pose_lines;
 	if (export_truth)
 		fs::create_directories(fs::path(options.truth_dir) / "masks");
 	if (export_truth && info.geometry.depth)
@@ -356,8 +346,10 @@ int run_batch(DaemonConfig config, const BatchOptions &options)
 						     {"camera_pose", frame.truth.camera_pose},
 						     {"objects", std::move(objects)},
 						     {"mask", name}};
+			std::string pose = tum_line(frame.device_ns, frame.truth.camera_pose);
 			std::lock_guard lock(truth_mutex);
 			truth_lines[frame.sequence] = line.dump();
+			pose_lines[frame.sequence] = std::move(pose);
 		});
 	}
 
@@ -397,7 +389,11 @@ int run_batch(DaemonConfig config, const BatchOptions &options)
 		std::ofstream truth(fs::path(options.truth_dir) / "truth.ndjson", std::ios::trunc);
 		for (const auto &[seq, line] : truth_lines)
 			truth << line << '\n';
-		write_truth_poses(fs::path(options.truth_dir) / "poses.tum", truth_lines);
+		std::ofstream poses(fs::path(options.truth_dir) / "poses.tum", std::ios::trunc);
+		poses << "# the source's true camera poses: world from left camera (x right, y down, z forward), "
+			 "metres\n# timestamp tx ty tz qx qy qz qw\n";
+		for (const auto &[seq, line] : pose_lines)
+			poses << line;
 	}
 	const auto s = pipeline.stats();
 	const double elapsed = static_cast<double>(monotonic_ns() - start_ns) * 1e-9;

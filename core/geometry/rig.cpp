@@ -11,8 +11,7 @@ std::optional<cv::Vec3d> StereoRig::triangulate(double u, double v, double dispa
 {
 	if (!(disparity_px > 0) || !std::isfinite(disparity_px) || !(fx > 0) || !(fy > 0))
 		return std::nullopt;
-	const double z = depth(disparity_px);
-	return cv::Vec3d((u - cx) * z / fx, (v - cy) * z / fy, z);
+	return back_project(u, v, depth(disparity_px));
 }
 
 std::optional<cv::Point2d> StereoRig::project(const cv::Vec3d &p) const

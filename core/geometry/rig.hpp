@@ -20,6 +20,11 @@ struct StereoRig {
 	[[nodiscard]] cv::Matx33d k() const { return {fx, 0, cx, 0, fy, cy, 0, 0, 1}; }
 	/// Depth of a point seen at disparity d (pixels): z = f b / d.
 	[[nodiscard]] double depth(double disparity_px) const { return fx * baseline_m / disparity_px; }
+	/// The left-camera point seen at (u, v) at depth z.
+	[[nodiscard]] cv::Vec3d back_project(double u, double v, double z) const
+	{
+		return {(u - cx) * z / fx, (v - cy) * z / fy, z};
+	}
 	/// The left-camera point seen at (u, v) with disparity d; nothing for d <= 0 or a non-finite one.
 	[[nodiscard]] std::optional<cv::Vec3d> triangulate(double u, double v, double disparity_px) const;
 	/// Where a left-camera point lands in the left image; nothing behind the camera.

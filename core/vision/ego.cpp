@@ -28,6 +28,27 @@ double normal_quantile(double p)
 	return (lo + hi) / 2;
 }
 
+/// Squared re-projection error of point i under `pose`; infinite when it lands behind the camera.
+double error2(const std::vector<cv::Point3f> &object, const std::vector<cv::Point2f> &image, size_t i,
+	      const geometry::StereoRig &rig, const geometry::Pose &pose)
+{
+	const auto p = rig.project(pose * cv::Vec3d(object[i].x, object[i].y, object[i].z));
+	if (!p)
+		return std::numeric_limits<double>::infinity();
+	const double dx = p->x - image[i].x, dy = p->y - image[i].y;
+	return dx * dx + dy * dy;
+}
+
+/// How many points `pose` explains: RANSAC's score, counted without building the list.
+size_t count_inliers(const std::vector<cv::Point3f> &object, const std::vector<cv::Point2f> &image,
+		     const geometry::StereoRig &rig, const geometry::Pose &pose, double threshold_px)
+{
+	size_t count = 0;
+	for (size_t i = 0; i < object.size(); ++i)
+		count += error2(object, image, i, rig, pose) <= threshold_px * threshold_px ? 1 : 0;
+	return count;
+}
+
 std::vector<int> inliers_of(const std::vector<cv::Point3f> &object, const std::vector<cv::Point2f> &image,
 			    const geometry::StereoRig &rig, const geometry::Pose &pose, double threshold_px,
 			    double &rms_px)
@@ -35,11 +56,7 @@ std::vector<int> inliers_of(const std::vector<cv::Point3f> &object, const std::v
 	std::vector<int> inliers;
 	double sum2 = 0;
 	for (size_t i = 0; i < object.size(); ++i) {
-		const auto p = rig.project(pose * cv::Vec3d(object[i].x, object[i].y, object[i].z));
-		if (!p)
-			continue;
-		const double dx = p->x - image[i].x, dy = p->y - image[i].y;
-		const double e2 = dx * dx + dy * dy;
+		const double e2 = error2(object, image, i, rig, pose);
 		if (e2 <= threshold_px * threshold_px) {
 			inliers.push_back(static_cast<int>(i));
 			sum2 += e2;
@@ -147,6 +164,7 @@ PoseEstimate estimate_pose(std::span<const cv::Vec3f> prev_xyz, std::span<const 
 	std::uniform_int_distribution<size_t> pick(0, object.size() - 1);
 	double rms = 0;
 	std::vector<int> inliers;
+	size_t best_support = 0;
 	geometry::Pose best;
 	for (int iteration = 0; iteration < params.ransac_iterations; ++iteration) {
 		std::array<size_t, 3> sample{};
@@ -171,15 +189,16 @@ PoseEstimate estimate_pose(std::span<const cv::Vec3f> prev_xyz, std::span<const 
 				pose_of(rvecs[static_cast<size_t>(solution)], tvecs[static_cast<size_t>(solution)]);
 			if (!plausible(hypothesis))
 				continue;
-			double hypothesis_rms = 0;
-			std::vector<int> support =
-				inliers_of(object, image, rig, hypothesis, params.ransac_threshold_px, hypothesis_rms);
-			if (support.size() > inliers.size()) {
-				inliers = std::move(support);
+			const size_t support =
+				count_inliers(object, image, rig, hypothesis, params.ransac_threshold_px);
+			if (support > best_support) {
+				best_support = support;
 				best = hypothesis;
 			}
 		}
 	}
+	if (best_support > 0)
+		inliers = inliers_of(object, image, rig, best, params.ransac_threshold_px, rms);
 	if (static_cast<int>(inliers.size()) < params.min_inliers) {
 		out.reason = "no consistent motion: " + std::to_string(inliers.size()) + " of " +
 			     std::to_string(out.candidates) + " points agree" +

@@ -35,11 +35,16 @@ std::vector<cv::Vec3f> points_from_depth(const std::vector<cv::KeyPoint> &keypoi
 		const float z = depth.at<float>(y, x);
 		if (!(z > 0) || !std::isfinite(z))
 			continue;
-		const double u = keypoints[i].pt.x, v = keypoints[i].pt.y;
-		xyz[i] = cv::Vec3f(static_cast<float>((u - rig.cx) * z / rig.fx),
-				   static_cast<float>((v - rig.cy) * z / rig.fy), z);
+		xyz[i] = cv::Vec3f(rig.back_project(keypoints[i].pt.x, keypoints[i].pt.y, z));
 	}
 	return xyz;
+}
+
+/// Whether keypoint `p` of the previous frame was labelled dynamic or failed a geometric test there.
+bool flagged_before(const TrackSet *prev_tracks, size_t p)
+{
+	return prev_tracks != nullptr && p < prev_tracks->dynamic_by_keypoint.size() &&
+	       prev_tracks->dynamic_by_keypoint[p] != 0;
 }
 
 /// The label a point gets from seed 000's label, the geometric test and whether its two ends look alike.
@@ -109,10 +114,8 @@ void anchor_tracks(TrackSet &tracks, std::span<const Match> matches, const Frame
 			continue;
 		// Like the per-frame test, confirmed by a failure in the frame before (ego.confirm_frames).
 		failed[i] = 1;
-		const auto p = static_cast<size_t>(matches[i].prev);
-		const bool failed_before =
-			p < prev_tracks.dynamic_by_keypoint.size() && prev_tracks.dynamic_by_keypoint[p] != 0;
-		if (params.ego.confirm_frames <= 1 || failed_before)
+		if (params.ego.confirm_frames <= 1 ||
+		    flagged_before(&prev_tracks, static_cast<size_t>(matches[i].prev)))
 			classification.labels[i] = PointLabel::Dynamic;
 	}
 }
@@ -229,11 +232,8 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 		for (size_t i = 0; i < n; ++i) {
 			prev_xyz[i] = prev->xyz[static_cast<size_t>(matches[i].prev)];
 			cur_px[i] = pairs[i].cur;
-			const auto p = static_cast<size_t>(matches[i].prev);
-			const bool was_dynamic = prev_tracks != nullptr &&
-						 p < prev_tracks->dynamic_by_keypoint.size() &&
-						 prev_tracks->dynamic_by_keypoint[p] != 0;
-			votes[i] = known_moving[i] == 0 && !was_dynamic;
+			votes[i] = known_moving[i] == 0 &&
+				   !flagged_before(prev_tracks, static_cast<size_t>(matches[i].prev));
 		}
 		std::optional<MotionPrior> prior;
 		if (prev_tracks != nullptr && prev_tracks->last_motion && prev_tracks->interval_ns > 0 &&
@@ -283,14 +283,9 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 					label = PointLabel::Uncertain;
 				if (test.moving)
 					failed[i] = 1;
-				if (!low_parallax && label == PointLabel::Dynamic && params.ego.confirm_frames > 1) {
-					const auto p = static_cast<size_t>(matches[i].prev);
-					const bool failed_before = prev_tracks != nullptr &&
-								   p < prev_tracks->dynamic_by_keypoint.size() &&
-								   prev_tracks->dynamic_by_keypoint[p] != 0;
-					if (!failed_before)
-						label = PointLabel::Uncertain; // not yet confirmed
-				}
+				if (!low_parallax && label == PointLabel::Dynamic && params.ego.confirm_frames > 1 &&
+				    !flagged_before(prev_tracks, static_cast<size_t>(matches[i].prev)))
+					label = PointLabel::Uncertain; // not yet confirmed
 				classification.labels[i] = label;
 			}
 		}
@@ -305,12 +300,16 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 		follow.predicted = predicted;
 	TrackSet tracks = follow_tracks(prev_tracks, follow, params.classifier, params.temporal);
 	promote_remembered_movers(classification.labels, matches, tracks, params.classifier, params.temporal);
-	if (pose && pose->valid && params.ego.anchor_min_frames > 0 && params.label_method != LabelMethod::Seed000) {
-		const geometry::Pose world_prev =
-			prev_tracks->world_from_camera ? *prev_tracks->world_from_camera : geometry::Pose{};
-		anchor_tracks(tracks, matches, cur, world_prev * pose->curr_from_prev.inverse(), classification,
-			      *params.rig, params, *prev_tracks, failed);
-	}
+	// The camera in the world: chained on from the previous frame, or carried over when no pose was found.
+	const geometry::Pose world_prev = prev_tracks != nullptr && prev_tracks->world_from_camera
+						  ? *prev_tracks->world_from_camera
+						  : geometry::Pose{};
+	const bool moved = pose && pose->valid;
+	const geometry::Pose prev_from_curr = moved ? pose->curr_from_prev.inverse() : geometry::Pose{};
+	const geometry::Pose world_from_curr = world_prev * prev_from_curr;
+	if (moved && params.ego.anchor_min_frames > 0 && params.label_method != LabelMethod::Seed000)
+		anchor_tracks(tracks, matches, cur, world_from_curr, classification, *params.rig, params, *prev_tracks,
+			      failed);
 	tracks.dynamic_by_keypoint.assign(cur.keypoints.size(), 0);
 	for (size_t i = 0; i < n; ++i)
 		if (classification.labels[i] == PointLabel::Dynamic || (i < failed.size() && failed[i] != 0))
@@ -341,22 +340,16 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 		ego.inliers = classification.homography_inliers;
 	}
 	if (metric) {
-		const geometry::Pose world_prev = prev_tracks != nullptr && prev_tracks->world_from_camera
-							  ? *prev_tracks->world_from_camera
-							  : geometry::Pose{};
-		ego.valid = pose && pose->valid;
-		if (pose && pose->valid) {
-			const geometry::Pose prev_from_curr = pose->curr_from_prev.inverse();
-			tracks.world_from_camera = world_prev * prev_from_curr;
+		// Without an estimate the camera is taken to stand where it was (world_from_curr = world_prev).
+		tracks.world_from_camera = world_from_curr;
+		ego.valid = moved;
+		if (moved) {
 			tracks.last_motion = pose->curr_from_prev;
 			ego.inliers = pose->inliers;
-			fill_pose(ego, &prev_from_curr, *tracks.world_from_camera);
 		} else {
-			// No estimate: the camera is taken to stand where it was, and the chain goes on from there.
-			tracks.world_from_camera = world_prev;
 			ego.reason = pose ? pose->reason : "the previous frame has no depth";
-			fill_pose(ego, nullptr, world_prev);
 		}
+		fill_pose(ego, moved ? &prev_from_curr : nullptr, world_from_curr);
 	}
 	if (classification.homography || metric)
 		result.ego = ego;
