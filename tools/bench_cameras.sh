@@ -1,7 +1,10 @@
 #!/usr/bin/env bash
 # Capture cost and latency against two fake GigE cameras (Aravis's own, in a private network namespace), and
 # the soak: frames lost and resident memory over a long run.
-#   tools/bench_cameras.sh BUILD_DIR [SECONDS=20] [FPS list="30 60"]
+#   tools/bench_cameras.sh BUILD_DIR [SECONDS=20] [FPS list="30 60"] [FAKE=stock|exposure]
+# FAKE: stock = Aravis's arv-fake-gv-camera-0.8 (stamps its sender's wake time, skips periods when it stalls);
+# exposure = the project's build/tests/stereod_fakecam --ramp (stamps the exposure slot, sends a late frame
+# from its frame memory; see tests/fakecam/stereod_fakecam.cpp).
 # Prints one table row per frame rate: frames, drops, |skew|, capture-to-publish latency, daemon CPU per frame
 # (classification off: this is the capture path, the cameras' receive threads and the socket), RSS at start
 # and end. The fake cameras run on the same two cores; their own CPU is reported apart.
@@ -12,6 +15,14 @@ set -euo pipefail
 BUILD=$(realpath "$1")
 SECONDS_RUN=${2:-20}
 RATES=${3:-30 60}
+FAKE=${4:-stock}
+fake_camera() { # address serial
+	if [ "$FAKE" = exposure ]; then
+		"$BUILD/tests/stereod_fakecam" "$1" "$2" --ramp >/dev/null 2>&1 &
+	else
+		arv-fake-gv-camera-0.8 -i "$1" -s "$2" >/dev/null 2>&1 &
+	fi
+}
 WORK=$(mktemp -d /tmp/stereod-bench.XXXXXX)
 trap 'kill $(jobs -p) 2>/dev/null; rm -rf "$WORK"' EXIT
 ip link set lo up
@@ -21,9 +32,9 @@ rss_mb() { awk '/VmRSS/ { printf "%.1f", $2 / 1024 }' "/proc/$1/status"; }
 printf '| fps | seconds | frames | drops (stereod) | unpaired (fake stalls) | max abs skew ms | latency p50 / p99 / max ms | stereod CPU ms/frame | fake cameras CPU ms/frame | RSS start -> end MB |\n'
 printf '|---|---|---|---|---|---|---|---|---|---|\n'
 for fps in $RATES; do
-	arv-fake-gv-camera-0.8 -i 127.0.0.1 -s B-L >/dev/null 2>&1 &
+	fake_camera 127.0.0.1 B-L
 	L=$!
-	arv-fake-gv-camera-0.8 -i 127.0.0.2 -s B-R >/dev/null 2>&1 &
+	fake_camera 127.0.0.2 B-R
 	R=$!
 	sleep 1.5
 	SOCK=$WORK/b.sock
