@@ -14,10 +14,12 @@
 #include <systemd/sd-daemon.h>
 
 #include "core/clock.hpp"
+#include "core/geometry/rectify.hpp"
 #include "core/geometry/rig.hpp"
 #include "core/protocol.hpp"
 #include "daemon/pipeline.hpp"
 #include "daemon/socket_server.hpp"
+#include "drivers/calibration_file.hpp"
 
 namespace stereod::daemon {
 namespace {
@@ -77,6 +79,34 @@ PipelineOptions pipeline_options(const DaemonConfig &config, const drivers::Sour
 	options.worker_nice = config.pipeline.worker_nice;
 	options.motion = config.motion;
 	options.motion.rig = info.calibration;
+	if (!config.calibration.file.empty()) {
+		// Refused at start, before any frame: a calibration for other images gives depth that looks right
+		// and is wrong.
+		const std::string &path = config.calibration.file;
+		geometry::PairCalibration calibration;
+		try {
+			calibration = drivers::read_calibration(path);
+		} catch (const drivers::CalibrationError &e) {
+			throw ConfigError(std::string("calibration.file: ") + e.what());
+		}
+		if (!info.geometry.stereo)
+			throw ConfigError("calibration.file: " + path + ": source '" + info.name +
+					  "' has no right eye");
+		const cv::Size image(info.geometry.width, info.geometry.height);
+		const auto problems = geometry::calibration_problems(calibration, image);
+		if (!problems.empty()) {
+			std::string message = "calibration.file: " + path + " does not fit source '" + info.name + "':";
+			for (const auto &problem : problems)
+				message += "\n  - " + problem;
+			throw ConfigError(message);
+		}
+		auto rectification =
+			std::make_shared<geometry::Rectification>(geometry::make_rectification(calibration, image));
+		options.motion.rig = rectification->rig;
+		spdlog::info("calibration: {} (rectified: f {:.1f} px, baseline {:.4f} m)", path, rectification->rig.fx,
+			     rectification->rig.baseline_m);
+		options.rectification = std::move(rectification);
+	}
 	return options;
 }
 

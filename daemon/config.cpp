@@ -185,6 +185,11 @@ const std::vector<Option> &options()
 		o.push_back(number(
 			"source", "fps", "frame rate for inputs that state none (folder pairs); 0 = theirs",
 			[](DaemonConfig &c) -> double & { return c.source.fps; }, 0, 1000));
+		// [calibration]
+		o.push_back(text("calibration", "file",
+				 "OpenCV stereo calibration (M1 D1 M2 D2 R T [R1 R2 P1 P2], YAML/XML, e.g. from "
+				 "stereoctl calibrate): both eyes are rectified with it; empty = the source's own",
+				 [](DaemonConfig &c) -> std::string & { return c.calibration.file; }));
 		// [aravis]
 		o.push_back(text("aravis", "left", "camera id: Vendor-Model-Serial, IP address or user id",
 				 [](DaemonConfig &c) -> std::string & { return c.source.aravis.left; }));

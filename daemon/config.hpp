@@ -32,8 +32,14 @@ struct LogConfig {
 	std::string level = "info";
 };
 
+struct CalibrationConfig {
+	/// OpenCV stereo calibration (YAML/XML/JSON, drivers/calibration_file.hpp); empty: the source's own.
+	std::string file;
+};
+
 struct DaemonConfig {
 	drivers::SourceConfig source;
+	CalibrationConfig calibration;
 	PipelineConfig pipeline;
 	vision::MotionParams motion;
 	OutputConfig output;

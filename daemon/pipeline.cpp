@@ -7,6 +7,7 @@
 #include <spdlog/spdlog.h>
 
 #include "core/clock.hpp"
+#include "core/stage_timer.hpp"
 
 namespace stereod::daemon {
 
@@ -242,8 +243,16 @@ void Pipeline::process(Job &job)
 	bool tracks_promised = false;
 	try {
 		if (job.provides_features && options_.motion.enabled) {
+			// The vision stages see rectified eyes; the pool frame (and what the observer records) keeps
+			// the camera's own pixels.
+			StereoFrame rectified;
+			if (options_.rectification) {
+				StageTimer timer(result.timing, "rectify");
+				rectified = geometry::rectify_frame(*options_.rectification, frame);
+			}
+			const StereoFrame &input = options_.rectification ? rectified : frame;
 			auto features = std::make_shared<const vision::FrameFeatures>(
-				vision::extract_stage(frame, options_.motion, result.timing));
+				vision::extract_stage(input, options_.motion, result.timing));
 			job.features.set_value(features);
 			promised = true;
 			// Both wait only for an earlier frame that another worker already holds: no deadlock. The
@@ -252,7 +261,7 @@ void Pipeline::process(Job &job)
 			const TracksPtr previous_tracks =
 				job.previous_tracks.valid() ? job.previous_tracks.get() : nullptr;
 			auto tracks = std::make_shared<const vision::TrackSet>(vision::pair_stage(
-				previous.get(), previous_tracks.get(), *features, frame, options_.motion, result));
+				previous.get(), previous_tracks.get(), *features, input, options_.motion, result));
 			job.tracks.set_value(std::move(tracks));
 			tracks_promised = true;
 		}

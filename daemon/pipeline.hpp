@@ -24,6 +24,7 @@
 #include <vector>
 
 #include "core/frame_pool.hpp"
+#include "core/geometry/rectify.hpp"
 #include "core/latency.hpp"
 #include "core/protocol.hpp"
 #include "core/result.hpp"
@@ -40,6 +41,8 @@ struct PipelineOptions {
 	int worker_nice = 0;			///< workers run this much nicer than capture (0 = same priority)
 	int64_t drain_limit_ns = 1'000'000'000; ///< live sources: how long a stop may spend on the backlog
 	vision::MotionParams motion;
+	/// From a calibration file: both eyes are rectified before any vision stage (motion.rig is then its rig).
+	std::shared_ptr<const geometry::Rectification> rectification;
 };
 
 struct PipelineStats {

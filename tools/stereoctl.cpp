@@ -564,6 +564,7 @@ int main(int argc, char **argv)
 
 	tools::add_devices_command(app);
 	tools::add_export_command(app);
+	tools::add_calibrate_command(app);
 
 	try {
 		app.parse(argc, argv);

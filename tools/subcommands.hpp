@@ -11,6 +11,8 @@ namespace stereod::tools {
 
 /// `stereoctl devices`: every camera each driver finds and what it can do.
 void add_devices_command(CLI::App &app);
+/// `stereoctl calibrate`: a stereo calibration from chessboard pairs (OpenCV YAML/XML for calibration.file).
+void add_calibrate_command(CLI::App &app);
 /// `stereoctl export`: a recording to PNG pairs (the `folder` layout) or a KITTI raw-data drive folder.
 void add_export_command(CLI::App &app);
 
