@@ -1,0 +1,280 @@
+#include "core/vision/affinity.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numeric>
+
+namespace stereod::vision {
+namespace {
+
+float squared_distance(const float *a, const float *b, int dims)
+{
+	float sum = 0;
+	for (int d = 0; d < dims; ++d) {
+		const float diff = a[d] - b[d];
+		sum += diff * diff;
+	}
+	return sum;
+}
+
+} // namespace
+
+const AffinityResult &AffinityPropagation::cluster(const cv::Mat &samples, const AffinityParams &params)
+{
+	CV_Assert(samples.empty() || (samples.type() == CV_32F && samples.isContinuous()));
+	AffinityResult &result = result_;
+	result.clusters = 0;
+	result.iterations = 0;
+	result.converged = false;
+	const auto n = static_cast<size_t>(samples.rows);
+	const int dims = samples.cols;
+	result.exemplar.assign(n, 0);
+	if (n <= 1) {
+		result.clusters = static_cast<int>(n);
+		result.converged = true;
+		return result;
+	}
+	const auto k = static_cast<size_t>(std::clamp<int>(params.neighbours, 1, static_cast<int>(n) - 1));
+	const auto *data = samples.ptr<float>();
+
+	// Similarities to the k nearest of each sample; the minimum over all pairs for the seed's preference.
+	row_start_.assign(n + 1, 0);
+	column_.resize(n * (k + 1));
+	similarity_.resize(n * (k + 1));
+	distances_.resize(n);
+	order_.resize(n);
+	float min_similarity = 0;
+	for (size_t i = 0; i < n; ++i) {
+		const float *xi = data + i * static_cast<size_t>(dims);
+		float farthest = 0;
+		for (size_t j = 0; j < n; ++j) {
+			const float d = squared_distance(xi, data + j * static_cast<size_t>(dims), dims);
+			farthest = std::max(farthest, d);
+			distances_[j] = d;
+		}
+		distances_[i] = std::numeric_limits<float>::infinity(); // never its own neighbour
+		min_similarity = std::min(min_similarity, -farthest);
+		std::iota(order_.begin(), order_.end(), 0u);
+		std::nth_element(order_.begin(), order_.begin() + static_cast<std::ptrdiff_t>(k - 1), order_.end(),
+				 [this](uint32_t a, uint32_t b) { return distances_[a] < distances_[b]; });
+		const size_t base = i * (k + 1);
+		for (size_t e = 0; e < k; ++e) {
+			column_[base + e] = order_[e];
+			similarity_[base + e] = -distances_[order_[e]];
+		}
+		column_[base + k] = static_cast<uint32_t>(i);
+		row_start_[i + 1] = static_cast<uint32_t>(base + k + 1);
+	}
+	const double preference = params.preference ? *params.preference : params.preference_scale * min_similarity;
+	result.preference = preference;
+	const size_t edges = n * (k + 1);
+	self_edge_.resize(n);
+	for (size_t i = 0; i < n; ++i) {
+		similarity_[i * (k + 1) + k] = static_cast<float>(preference);
+		self_edge_[i] = static_cast<uint32_t>(i * (k + 1) + k);
+	}
+	// Column index: the edges pointing at each sample, for the availability update.
+	column_start_.assign(n + 1, 0);
+	for (size_t e = 0; e < edges; ++e)
+		++column_start_[column_[e] + 1];
+	std::partial_sum(column_start_.begin(), column_start_.end(), column_start_.begin());
+	column_edges_.resize(edges);
+	positive_sum_.assign(n, 0); // used as a fill cursor first
+	for (size_t e = 0; e < edges; ++e) {
+		const uint32_t c = column_[e];
+		column_edges_[column_start_[c] + static_cast<uint32_t>(positive_sum_[c])] = static_cast<uint32_t>(e);
+		positive_sum_[c] += 1;
+	}
+	responsibility_.assign(edges, 0);
+	availability_.assign(edges, 0);
+	exemplar_flag_.assign(n, 0);
+	const auto lambda = static_cast<float>(params.damping);
+	int unchanged = 0;
+	int iteration = 0;
+	for (; iteration < params.max_iterations; ++iteration) {
+		// Responsibilities: r(i,k) = s(i,k) - max over k' != k of (a(i,k') + s(i,k')).
+		for (size_t i = 0; i < n; ++i) {
+			float best = -std::numeric_limits<float>::infinity(), second = best;
+			size_t best_edge = 0;
+			for (size_t e = row_start_[i]; e < row_start_[i + 1]; ++e) {
+				const float v = availability_[e] + similarity_[e];
+				if (v > best) {
+					second = best;
+					best = v;
+					best_edge = e;
+				} else if (v > second) {
+					second = v;
+				}
+			}
+			for (size_t e = row_start_[i]; e < row_start_[i + 1]; ++e) {
+				const float update = similarity_[e] - (e == best_edge ? second : best);
+				responsibility_[e] = lambda * responsibility_[e] + (1 - lambda) * update;
+			}
+		}
+		// Availabilities: a(i,k) = min(0, r(k,k) + sum over i' not in {i,k} of max(0, r(i',k)));
+		// a(k,k) = sum over i' != k of max(0, r(i',k)).
+		for (size_t c = 0; c < n; ++c) {
+			float sum = 0;
+			for (size_t idx = column_start_[c]; idx < column_start_[c + 1]; ++idx) {
+				const uint32_t e = column_edges_[idx];
+				if (e != self_edge_[c])
+					sum += std::max(0.f, responsibility_[e]);
+			}
+			const float self_r = responsibility_[self_edge_[c]];
+			for (size_t idx = column_start_[c]; idx < column_start_[c + 1]; ++idx) {
+				const uint32_t e = column_edges_[idx];
+				const float update =
+					e == self_edge_[c]
+						? sum
+						: std::min(0.f, self_r + sum - std::max(0.f, responsibility_[e]));
+				availability_[e] = lambda * availability_[e] + (1 - lambda) * update;
+			}
+		}
+		bool changed = false;
+		for (size_t i = 0; i < n; ++i) {
+			const uint8_t is = responsibility_[self_edge_[i]] + availability_[self_edge_[i]] > 0 ? 1 : 0;
+			changed = changed || is != exemplar_flag_[i];
+			exemplar_flag_[i] = is;
+		}
+		const bool any = std::any_of(exemplar_flag_.begin(), exemplar_flag_.end(), [](uint8_t f) { return f; });
+		unchanged = changed || !any ? 0 : unchanged + 1;
+		if (unchanged >= params.convergence_iterations) {
+			result.converged = true;
+			++iteration;
+			break;
+		}
+	}
+	result.iterations = iteration;
+	// Assignment: each sample to its most similar exemplar (an exemplar to itself). A sample with no exemplar
+	// among its neighbours looks at all of them; with no exemplar at all, the one with the largest
+	// r(k,k) + a(k,k) serves.
+	stable_exemplars_.clear();
+	for (size_t i = 0; i < n; ++i)
+		if (exemplar_flag_[i])
+			stable_exemplars_.push_back(static_cast<int>(i));
+	if (stable_exemplars_.empty()) {
+		size_t best = 0;
+		for (size_t i = 1; i < n; ++i)
+			if (responsibility_[self_edge_[i]] + availability_[self_edge_[i]] >
+			    responsibility_[self_edge_[best]] + availability_[self_edge_[best]])
+				best = i;
+		stable_exemplars_.push_back(static_cast<int>(best));
+		exemplar_flag_[best] = 1;
+	}
+	for (size_t i = 0; i < n; ++i) {
+		if (exemplar_flag_[i]) {
+			result.exemplar[i] = static_cast<int>(i);
+			continue;
+		}
+		float best = -std::numeric_limits<float>::infinity();
+		int chosen = -1;
+		for (size_t e = row_start_[i]; e + 1 < row_start_[i + 1]; ++e)
+			if (exemplar_flag_[column_[e]] && similarity_[e] > best) {
+				best = similarity_[e];
+				chosen = static_cast<int>(column_[e]);
+			}
+		if (chosen < 0)
+			for (const int x : stable_exemplars_) {
+				const float s = -squared_distance(
+					data + i * static_cast<size_t>(dims),
+					data + static_cast<size_t>(x) * static_cast<size_t>(dims), dims);
+				if (s > best) {
+					best = s;
+					chosen = x;
+				}
+			}
+		result.exemplar[i] = chosen;
+	}
+	result.clusters = static_cast<int>(stable_exemplars_.size());
+	return result;
+}
+
+AffinityResult affinity_propagation_dense(const cv::Mat &samples, const AffinityParams &params)
+{
+	CV_Assert(samples.empty() || (samples.type() == CV_32F && samples.isContinuous()));
+	AffinityResult result;
+	const int n = samples.rows;
+	result.exemplar.assign(static_cast<size_t>(n), 0);
+	if (n <= 1) {
+		result.clusters = n;
+		result.converged = true;
+		return result;
+	}
+	cv::Mat s(n, n, CV_64F), r(n, n, CV_64F, cv::Scalar(0)), a(n, n, CV_64F, cv::Scalar(0));
+	double min_s = 0;
+	for (int i = 0; i < n; ++i)
+		for (int j = 0; j < n; ++j) {
+			s.at<double>(i, j) = -static_cast<double>(
+				squared_distance(samples.ptr<float>(i), samples.ptr<float>(j), samples.cols));
+			min_s = std::min(min_s, s.at<double>(i, j));
+		}
+	result.preference = params.preference ? *params.preference : params.preference_scale * min_s;
+	for (int i = 0; i < n; ++i)
+		s.at<double>(i, i) = result.preference;
+	const double lambda = params.damping;
+	std::vector<uint8_t> exemplar(static_cast<size_t>(n), 0);
+	int unchanged = 0, iteration = 0;
+	for (; iteration < params.max_iterations; ++iteration) {
+		for (int i = 0; i < n; ++i) {
+			// max over k' != k of a(i,k') + s(i,k'): the row's largest, or its second for the largest's k
+			double best = -std::numeric_limits<double>::infinity(), second = best;
+			int best_k = 0;
+			for (int k = 0; k < n; ++k) {
+				const double v = a.at<double>(i, k) + s.at<double>(i, k);
+				if (v > best) {
+					second = best;
+					best = v;
+					best_k = k;
+				} else if (v > second) {
+					second = v;
+				}
+			}
+			for (int k = 0; k < n; ++k)
+				r.at<double>(i, k) =
+					lambda * r.at<double>(i, k) +
+					(1 - lambda) * (s.at<double>(i, k) - (k == best_k ? second : best));
+		}
+		for (int k = 0; k < n; ++k) {
+			double sum = 0; // over i' != k of max(0, r(i',k))
+			for (int i = 0; i < n; ++i)
+				if (i != k)
+					sum += std::max(0.0, r.at<double>(i, k));
+			for (int i = 0; i < n; ++i) {
+				const double update = i == k ? sum
+							     : std::min(0.0, r.at<double>(k, k) + sum -
+										     std::max(0.0, r.at<double>(i, k)));
+				a.at<double>(i, k) = lambda * a.at<double>(i, k) + (1 - lambda) * update;
+			}
+		}
+		bool changed = false, any = false;
+		for (int i = 0; i < n; ++i) {
+			const uint8_t is = r.at<double>(i, i) + a.at<double>(i, i) > 0 ? 1 : 0;
+			changed = changed || is != exemplar[static_cast<size_t>(i)];
+			exemplar[static_cast<size_t>(i)] = is;
+			any = any || is;
+		}
+		unchanged = changed || !any ? 0 : unchanged + 1;
+		if (unchanged >= params.convergence_iterations) {
+			result.converged = true;
+			++iteration;
+			break;
+		}
+	}
+	result.iterations = iteration;
+	for (int i = 0; i < n; ++i) {
+		int chosen = -1;
+		double best = -std::numeric_limits<double>::infinity();
+		for (int k = 0; k < n; ++k)
+			if (exemplar[static_cast<size_t>(k)] && (k == i ? 0.0 : s.at<double>(i, k)) > best &&
+			    (exemplar[static_cast<size_t>(i)] == 0 || k == i)) {
+				best = k == i ? 0.0 : s.at<double>(i, k);
+				chosen = k;
+			}
+		result.exemplar[static_cast<size_t>(i)] = chosen;
+	}
+	result.clusters = static_cast<int>(std::count(exemplar.begin(), exemplar.end(), 1));
+	return result;
+}
+
+} // namespace stereod::vision
