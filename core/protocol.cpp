@@ -130,12 +130,30 @@ std::string frame_message(const FrameResult &result)
 	}
 
 	json groups = json::array();
-	for (const auto &group : result.groups)
-		groups.push_back({{"id", group.id},
-				  {"position_m", group.position_m},
-				  {"velocity_mps", group.velocity_mps},
-				  {"heading_rad", group.heading_rad},
-				  {"points", group.point_count}});
+	for (const auto &group : result.groups) {
+		json g = {
+			{"id", group.id},
+			{"box_px",
+			 {round_to(group.box_px[0], 0.1), round_to(group.box_px[1], 0.1),
+			  round_to(group.box_px[2], 0.1), round_to(group.box_px[3], 0.1)}},
+			{"points", group.point_count},
+			{"age_frames", group.age_frames},
+			{"image_velocity_pxps",
+			 {round_to(group.image_velocity_pxps[0], 0.01), round_to(group.image_velocity_pxps[1], 0.01)}}};
+		const auto put3 = [&g](const char *key, const std::optional<std::array<double, 3>> &v) {
+			if (v)
+				g[key] = {round_to((*v)[0], 0.001), round_to((*v)[1], 0.001), round_to((*v)[2], 0.001)};
+		};
+		put3("position_m", group.position_m);
+		put3("extent_m", group.extent_m);
+		put3("velocity_mps", group.velocity_mps);
+		put3("world_velocity_mps", group.world_velocity_mps);
+		if (group.speed_mps)
+			g["speed_mps"] = round_to(*group.speed_mps, 0.001);
+		if (group.heading_rad)
+			g["heading_rad"] = round_to(*group.heading_rad, 0.001);
+		groups.push_back(std::move(g));
+	}
 	message["groups"] = std::move(groups);
 	return message.dump();
 }
@@ -193,10 +211,28 @@ FrameResult parse_frame_message(const json &message)
 					      s.at("candidates").get<int>(), s.at("outside_band").get<int>(),
 					      s.at("median_row_diff_px").get<float>()};
 	}
-	for (const auto &g : message.at("groups"))
-		result.groups.push_back({g.at("id").get<int>(), g.at("position_m").get<std::array<double, 3>>(),
-					 g.at("velocity_mps").get<std::array<double, 3>>(),
-					 g.at("heading_rad").get<double>(), g.at("points").get<int>()});
+	for (const auto &g : message.at("groups")) {
+		TargetGroup group;
+		group.id = g.at("id").get<int>();
+		group.box_px = g.at("box_px").get<std::array<float, 4>>();
+		group.point_count = g.at("points").get<int>();
+		group.age_frames = g.at("age_frames").get<int>();
+		group.image_velocity_pxps = g.at("image_velocity_pxps").get<std::array<float, 2>>();
+		const auto get3 = [&g](const char *key) -> std::optional<std::array<double, 3>> {
+			if (!g.contains(key))
+				return std::nullopt;
+			return g.at(key).get<std::array<double, 3>>();
+		};
+		group.position_m = get3("position_m");
+		group.extent_m = get3("extent_m");
+		group.velocity_mps = get3("velocity_mps");
+		group.world_velocity_mps = get3("world_velocity_mps");
+		if (g.contains("speed_mps"))
+			group.speed_mps = g.at("speed_mps").get<double>();
+		if (g.contains("heading_rad"))
+			group.heading_rad = g.at("heading_rad").get<double>();
+		result.groups.push_back(group);
+	}
 	return result;
 }
 

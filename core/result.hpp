@@ -52,13 +52,22 @@ struct StereoSummary {
 	float median_row_diff_px = 0; ///< v_left - v_right of the matches, sub-pixel
 };
 
-/// A moving-target group (filled by the grouping stage of a later issue).
+/// A moving-target group (core/vision/groups.hpp): points moving together against the static scene.
 struct TargetGroup {
-	int id = 0;
-	std::array<double, 3> position_m{};
-	std::array<double, 3> velocity_mps{};
-	double heading_rad = 0;
+	int id = 0;		       ///< the same while the group stays in view
+	std::array<float, 4> box_px{}; ///< u0, v0, u1, v1 in the left image
 	int point_count = 0;
+	int age_frames = 0;
+	std::array<float, 2> image_velocity_pxps{}; ///< du, dv: the members' motion in the image
+	/// Where depth exists (left camera, metres): median position, 10-90 % extent, velocity relative to the
+	/// camera; with a metric pose also in the world (ego-motion removed), its speed and heading
+	/// (atan2(x, z) of the world velocity: 0 along the first frame's optical axis, +pi/2 to its right).
+	std::optional<std::array<double, 3>> position_m;
+	std::optional<std::array<double, 3>> extent_m;
+	std::optional<std::array<double, 3>> velocity_mps;
+	std::optional<std::array<double, 3>> world_velocity_mps;
+	std::optional<double> speed_mps;
+	std::optional<double> heading_rad;
 };
 
 struct StageTime {

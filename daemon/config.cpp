@@ -583,6 +583,66 @@ const std::vector<Option> &options()
 			"memory", "min_age", "frames a point is followed before its memory may label it",
 			[](DaemonConfig &c) -> int & { return c.motion.temporal.min_age; }, 1, 10000));
 
+		// [groups]: moving-target groups (core/vision/groups.hpp)
+		o.push_back(boolean("groups", "enabled", "find moving-target groups (seed 002's flow clustering)",
+				    [](DaemonConfig &c) -> bool & { return c.motion.groups.enabled; }));
+		o.push_back(number(
+			"groups", "min_flow_px",
+			"shortest residual flow (pixels per frame) that counts as strong motion",
+			[](DaemonConfig &c) -> double & { return c.motion.groups.min_flow_px; }, 0, 1000));
+		o.push_back(number(
+			"groups", "position_scale_px", "sample normalisation: image distance still in one group",
+			[](DaemonConfig &c) -> double & { return c.motion.groups.position_scale_px; }, 1, 10000));
+		o.push_back(number(
+			"groups", "flow_scale_px",
+			"sample normalisation: flow difference (pixels per frame) still in one group",
+			[](DaemonConfig &c) -> double & { return c.motion.groups.flow_scale_px; }, 0.01, 1000));
+		o.push_back(number(
+			"groups", "disparity_scale_px", "sample normalisation: disparity difference still in one group",
+			[](DaemonConfig &c) -> double & { return c.motion.groups.disparity_scale_px; }, 0.01, 1000));
+		o.push_back(number(
+			"groups", "octave_scale", "sample normalisation: pyramid levels still in one group",
+			[](DaemonConfig &c) -> double & { return c.motion.groups.octave_scale; }, 0.01, 100));
+		o.push_back(number(
+			"groups", "max_points", "strong points clustered per frame at most (an even subsample beyond)",
+			[](DaemonConfig &c) -> int & { return c.motion.groups.max_points; }, 1, 100000));
+		o.push_back(number(
+			"groups", "min_points", "points a cluster needs to be a group",
+			[](DaemonConfig &c) -> int & { return c.motion.groups.min_points; }, 1, 100000));
+		o.push_back(number(
+			"groups", "neighbours", "Affinity Propagation: messages to this many nearest samples",
+			[](DaemonConfig &c) -> int & { return c.motion.groups.affinity.neighbours; }, 1, 10000));
+		o.push_back(number(
+			"groups", "damping", "Affinity Propagation: damping lambda",
+			[](DaemonConfig &c) -> double & { return c.motion.groups.affinity.damping; }, 0.5, 0.99));
+		o.push_back(number(
+			"groups", "max_iterations", "Affinity Propagation: iteration cap",
+			[](DaemonConfig &c) -> int & { return c.motion.groups.affinity.max_iterations; }, 1, 100000));
+		o.push_back(number(
+			"groups", "preference_scale",
+			"Affinity Propagation: preference = this x the minimum similarity (seed 002: 1)",
+			[](DaemonConfig &c) -> double & { return c.motion.groups.affinity.preference_scale; }, 0.001,
+			1000));
+		o.push_back(number(
+			"groups", "association_px",
+			"tracks: largest distance from a group's predicted centre to a new cluster",
+			[](DaemonConfig &c) -> double & { return c.motion.groups.association_px; }, 1, 10000));
+		o.push_back(number(
+			"groups", "max_missed_frames", "tracks: frames a group is remembered unseen",
+			[](DaemonConfig &c) -> int & { return c.motion.groups.max_missed_frames; }, 0, 1000));
+		o.push_back(number(
+			"groups", "min_age_frames", "tracks: frames a group must be seen before it is published",
+			[](DaemonConfig &c) -> int & { return c.motion.groups.min_age_frames; }, 1, 1000));
+		o.push_back(number(
+			"groups", "smoothing", "tracks: weight of the new measurement in the velocity averages",
+			[](DaemonConfig &c) -> double & { return c.motion.groups.smoothing; }, 0.01, 1));
+		o.push_back(boolean("groups", "label_points", "label points inside a group moving with it dynamic",
+				    [](DaemonConfig &c) -> bool & { return c.motion.groups.label_points; }));
+		o.push_back(number(
+			"groups", "label_tolerance_px",
+			"labels: residual difference to the group's still counted as moving with it",
+			[](DaemonConfig &c) -> double & { return c.motion.groups.label_tolerance_px; }, 0, 1000));
+
 		// [output]
 		o.push_back(text("output", "socket", "Unix socket path for clients",
 				 [](DaemonConfig &c) -> std::string & { return c.output.socket; }));

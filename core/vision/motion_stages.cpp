@@ -310,6 +310,56 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 	if (moved && params.ego.anchor_min_frames > 0 && params.label_method != LabelMethod::Seed000)
 		anchor_tracks(tracks, matches, cur, world_from_curr, classification, *params.rig, params, *prev_tracks,
 			      failed);
+	std::vector<int> group_of_point; // per match: the published group it moves with, or -1
+	if (params.groups.enabled) {
+		StageTimer groups_timer(result.timing, "groups");
+		// Each point's motion against what the static scene would do: the pose's prediction (stereo), else
+		// the homography, else standing still.
+		std::vector<MotionPoint> motion(n);
+		for (size_t i = 0; i < n; ++i) {
+			MotionPoint &m = motion[i];
+			m.px = pairs[i].cur;
+			m.flow = pairs[i].cur - pairs[i].prev;
+			cv::Point2f expected = pairs[i].prev;
+			if (i < predicted.size() && std::isfinite(predicted[i].x)) {
+				expected = predicted[i];
+			} else if (moved) {
+				// With a metric pose, a point without depth has no prediction: a homography cannot
+				// explain the parallax of a camera moving through the scene, so it stays out of the
+				// grouping.
+				expected = cv::Point2f(kNaN, kNaN);
+			} else if (classification.homography) {
+				const cv::Vec3d h =
+					*classification.homography * cv::Vec3d(pairs[i].prev.x, pairs[i].prev.y, 1);
+				if (h[2] != 0)
+					expected = cv::Point2f(static_cast<float>(h[0] / h[2]),
+							       static_cast<float>(h[1] / h[2]));
+			}
+			m.residual = pairs[i].cur - expected;
+			const auto c = static_cast<size_t>(matches[i].cur);
+			const auto p = static_cast<size_t>(matches[i].prev);
+			m.octave = cur.keypoints[c].octave;
+			if (c < cur.xyz.size() && std::isfinite(cur.xyz[c][2]))
+				m.xyz = cur.xyz[c];
+			if (p < prev->xyz.size() && std::isfinite(prev->xyz[p][2]))
+				m.prev_xyz = prev->xyz[p];
+		}
+		GroupMotionContext context;
+		if (prev_tracks != nullptr && frame.device_ns > prev_tracks->t_ns)
+			context.dt_s = static_cast<double>(frame.device_ns - prev_tracks->t_ns) * 1e-9;
+		if (moved) {
+			context.curr_from_prev = pose->curr_from_prev;
+			context.world_from_curr = world_from_curr;
+		}
+		context.rig = params.rig;
+		// Affinity Propagation's buffers, kept per worker thread so that clustering does not allocate.
+		thread_local AffinityPropagation workspace;
+		GroupOutput found = find_groups(motion, prev_tracks != nullptr ? &prev_tracks->groups : nullptr,
+						context, params.groups, workspace);
+		group_of_point = std::move(found.group_of_point);
+		tracks.groups = std::move(found.memory);
+		result.groups = std::move(found.groups);
+	}
 	tracks.dynamic_by_keypoint.assign(cur.keypoints.size(), 0);
 	for (size_t i = 0; i < n; ++i)
 		if (classification.labels[i] == PointLabel::Dynamic || (i < failed.size() && failed[i] != 0))
@@ -322,6 +372,10 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 		point.prev_u = pairs[i].prev.x;
 		point.prev_v = pairs[i].prev.y;
 		point.label = classification.labels[i];
+		// A group's label is for the output only: it does not keep points from voting for the next pose or
+		// confirm them, so a group that wrongly covers static points cannot feed back into the pose.
+		if (params.groups.label_points && i < group_of_point.size() && group_of_point[i] >= 0)
+			point.label = PointLabel::Dynamic;
 		const auto c = static_cast<size_t>(matches[i].cur);
 		point.track = tracks.by_keypoint[c].id;
 		if (c < cur.xyz.size() && std::isfinite(cur.xyz[c][2]))

@@ -36,6 +36,7 @@ struct MotionParams {
 	StereoParams stereo;
 	EgoParams ego;
 	LabelMethod label_method = LabelMethod::Combined;
+	GroupParams groups;
 	/// The source's rectified calibration; without it there is no depth and no metric pose.
 	std::optional<geometry::StereoRig> rig;
 };

@@ -26,6 +26,7 @@
 #include "core/geometry/rig.hpp"
 #include "core/result.hpp"
 #include "core/vision/classifier.hpp"
+#include "core/vision/groups.hpp"
 #include "core/vision/matching.hpp"
 
 namespace stereod::vision {
@@ -66,6 +67,8 @@ struct TrackSet {
 	/// for the next frame's pose (seed 001: points found dynamic are left out of tracking), so a mover found
 	/// once cannot pull the pose; and a point failing the test again next frame is confirmed dynamic.
 	std::vector<uint8_t> dynamic_by_keypoint;
+	/// Moving-target groups followed so far (core/vision/groups.hpp).
+	GroupMemory groups;
 };
 
 /// What follow_tracks() needs to know about one match: which keypoints it joins, both ends, and the colours.

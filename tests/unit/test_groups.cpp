@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include "core/vision/affinity.hpp"
+#include "core/vision/groups.hpp"
 
 using namespace stereod;
 using namespace stereod::vision;
@@ -91,4 +92,96 @@ TEST(AffinityPropagation, TrivialSizes)
 	const auto &r = ap.cluster(one, {});
 	EXPECT_EQ(r.clusters, 1);
 	EXPECT_EQ(r.exemplar, std::vector<int>{0});
+}
+
+namespace {
+
+/// One frame of a constructed scene: a static background (residual ~0, a little noise) and two groups
+/// of 20 points crossing each other, A (rows 200-240) moving right, B (rows 260-300) moving left.
+std::vector<MotionPoint> crossing_frame(int frame, std::mt19937 &rng)
+{
+	std::normal_distribution<float> noise(0.f, 0.2f);
+	std::vector<MotionPoint> points;
+	for (int i = 0; i < 120; ++i) {
+		MotionPoint p;
+		p.px = {static_cast<float>((i * 37) % 640), static_cast<float>((i * 53) % 480)};
+		p.residual = {noise(rng), noise(rng)};
+		p.flow = p.residual;
+		points.push_back(p);
+	}
+	for (int group = 0; group < 2; ++group) {
+		const float speed = group == 0 ? 6.f : -6.f;
+		const float x0 = group == 0 ? 100.f + speed * static_cast<float>(frame)
+					    : 540.f + speed * static_cast<float>(frame);
+		const float y0 = group == 0 ? 200.f : 260.f;
+		for (int i = 0; i < 20; ++i) {
+			MotionPoint p;
+			p.px = {x0 + static_cast<float>(i % 5) * 8.f, y0 + static_cast<float>(i / 5) * 10.f};
+			p.flow = {speed + noise(rng), noise(rng)};
+			p.residual = p.flow;
+			points.push_back(p);
+		}
+	}
+	return points;
+}
+
+} // namespace
+
+TEST(Groups, IdsSurviveTwoGroupsCrossing)
+{
+	std::mt19937 rng(5);
+	GroupParams params;
+	AffinityPropagation workspace;
+	GroupMemory memory;
+	GroupMotionContext context;
+	context.dt_s = 0.1;
+	int id_a = 0, id_b = 0;
+	// 70 frames: A from x=100 to 520, B from 540 to 120; they pass each other around frame 37.
+	for (int frame = 0; frame < 70; ++frame) {
+		const auto points = crossing_frame(frame, rng);
+		GroupOutput out = find_groups(points, frame == 0 ? nullptr : &memory, context, params, workspace);
+		memory = out.memory;
+		if (frame == 0) {
+			EXPECT_TRUE(out.groups.empty()) << "published before min_age_frames";
+			continue;
+		}
+		ASSERT_EQ(out.groups.size(), 2u) << "frame " << frame;
+		// Which published group is A: the one moving right.
+		const auto &a = out.groups[0].image_velocity_pxps[0] > 0 ? out.groups[0] : out.groups[1];
+		const auto &b = out.groups[0].image_velocity_pxps[0] > 0 ? out.groups[1] : out.groups[0];
+		EXPECT_NEAR(a.image_velocity_pxps[0], 60, 6) << "frame " << frame;
+		EXPECT_NEAR(b.image_velocity_pxps[0], -60, 6) << "frame " << frame;
+		EXPECT_EQ(a.point_count, 20) << "frame " << frame;
+		if (frame == 1) {
+			id_a = a.id;
+			id_b = b.id;
+			EXPECT_NE(id_a, id_b);
+		}
+		EXPECT_EQ(a.id, id_a) << "frame " << frame;
+		EXPECT_EQ(b.id, id_b) << "frame " << frame;
+		// No background point is called part of a group.
+		for (size_t i = 0; i < 120; ++i)
+			EXPECT_EQ(out.group_of_point[i], -1) << "background point " << i << " in frame " << frame;
+	}
+}
+
+TEST(Groups, StillSceneHasNoGroup)
+{
+	std::mt19937 rng(9);
+	std::normal_distribution<float> noise(0.f, 0.3f);
+	std::vector<MotionPoint> points(300);
+	for (size_t i = 0; i < points.size(); ++i) {
+		points[i].px = {static_cast<float>((i * 37) % 640), static_cast<float>((i * 53) % 480)};
+		points[i].residual = {noise(rng), noise(rng)}; // what a pose-explained scene leaves: noise
+	}
+	AffinityPropagation workspace;
+	GroupMemory memory;
+	for (int frame = 0; frame < 5; ++frame) {
+		const GroupOutput out =
+			find_groups(points, frame == 0 ? nullptr : &memory, {0.1, {}, {}, {}}, {}, workspace);
+		memory = out.memory;
+		EXPECT_TRUE(out.groups.empty());
+		// sigma 0.3 px: one point in ~250 is 1 px off by chance; alone it makes no group
+		EXPECT_LE(out.strong.size(), 4u) << "noise under min_flow_px is not strong motion";
+	}
 }

@@ -95,6 +95,43 @@ TEST(Protocol, StereoPoseAndDepthRoundTrip)
 	EXPECT_EQ(lost.ego->reason, ego.reason);
 }
 
+TEST(Protocol, GroupsRoundTripWithDepthFieldsOnlyWhereMeasured)
+{
+	FrameResult r;
+	TargetGroup image_only;
+	image_only.id = 4;
+	image_only.box_px = {10.5F, 20, 110, 220.25F};
+	image_only.point_count = 17;
+	image_only.age_frames = 9;
+	image_only.image_velocity_pxps = {-35.5F, 2.25F};
+	TargetGroup metric = image_only;
+	metric.id = 5;
+	metric.position_m = std::array<double, 3>{1.5, 0.25, 7.125};
+	metric.extent_m = std::array<double, 3>{0.5, 1.75, 0.375};
+	metric.velocity_mps = std::array<double, 3>{-1.25, 0, 0.5};
+	metric.world_velocity_mps = std::array<double, 3>{-1.5, 0, 0};
+	metric.speed_mps = 1.5;
+	metric.heading_rad = -1.571;
+	r.groups = {image_only, metric};
+	const auto json = nlohmann::json::parse(protocol::frame_message(r));
+	EXPECT_FALSE(json.at("groups")[0].contains("position_m")) << "never invented";
+	EXPECT_FALSE(json.at("groups")[0].contains("speed_mps"));
+	EXPECT_EQ(json.at("groups")[1].at("box_px").size(), 4U);
+	const FrameResult back = protocol::parse_frame_message(json);
+	ASSERT_EQ(back.groups.size(), 2U);
+	EXPECT_EQ(back.groups[0].id, 4);
+	EXPECT_EQ(back.groups[0].point_count, 17);
+	EXPECT_EQ(back.groups[0].age_frames, 9);
+	EXPECT_FLOAT_EQ(back.groups[0].box_px[3], 220.3F); // rounded to 0.1 px
+	EXPECT_FLOAT_EQ(back.groups[0].image_velocity_pxps[0], -35.5F);
+	EXPECT_FALSE(back.groups[0].position_m.has_value());
+	ASSERT_TRUE(back.groups[1].position_m && back.groups[1].world_velocity_mps && back.groups[1].heading_rad);
+	EXPECT_DOUBLE_EQ((*back.groups[1].position_m)[2], 7.125);
+	EXPECT_DOUBLE_EQ((*back.groups[1].extent_m)[1], 1.75);
+	EXPECT_DOUBLE_EQ(*back.groups[1].speed_mps, 1.5);
+	EXPECT_DOUBLE_EQ(*back.groups[1].heading_rad, -1.571);
+}
+
 TEST(Protocol, RejectsOtherVersions)
 {
 	auto j = nlohmann::json::parse(protocol::frame_message(FrameResult{}));

@@ -1,0 +1,271 @@
+#include "core/vision/groups.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+
+namespace stereod::vision {
+namespace {
+
+float median_of_copy(std::vector<float> v)
+{
+	if (v.empty())
+		return 0;
+	const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
+	std::nth_element(v.begin(), mid, v.end());
+	return *mid;
+}
+
+float percentile_of(std::vector<float> &v, double q)
+{
+	const auto at = v.begin() + static_cast<std::ptrdiff_t>(std::lround(q * static_cast<double>(v.size() - 1)));
+	std::nth_element(v.begin(), at, v.end());
+	return *at;
+}
+
+std::array<double, 3> array_of(const cv::Vec3d &v)
+{
+	return {v[0], v[1], v[2]};
+}
+
+/// One cluster's measurements before tracking.
+struct Cluster {
+	std::vector<uint32_t> members; ///< point indices
+	cv::Rect2f box;
+	cv::Point2f centre;
+	cv::Point2f flow;     ///< median observed flow, pixels per frame
+	cv::Point2f residual; ///< median residual
+	std::optional<cv::Vec3d> position, extent, velocity, world_velocity;
+};
+
+Cluster measure(std::vector<uint32_t> members, const std::vector<MotionPoint> &points,
+		const GroupMotionContext &context)
+{
+	Cluster c;
+	c.members = std::move(members);
+	std::vector<float> u, v, fu, fv, ru, rv;
+	float u0 = 1e9f, v0 = 1e9f, u1 = -1e9f, v1 = -1e9f;
+	std::array<std::vector<float>, 3> xyz, rel, world;
+	for (const uint32_t i : c.members) {
+		const MotionPoint &p = points[i];
+		u0 = std::min(u0, p.px.x);
+		v0 = std::min(v0, p.px.y);
+		u1 = std::max(u1, p.px.x);
+		v1 = std::max(v1, p.px.y);
+		u.push_back(p.px.x);
+		v.push_back(p.px.y);
+		fu.push_back(p.flow.x);
+		fv.push_back(p.flow.y);
+		ru.push_back(p.residual.x);
+		rv.push_back(p.residual.y);
+		if (!p.xyz)
+			continue;
+		for (int a = 0; a < 3; ++a)
+			xyz[static_cast<size_t>(a)].push_back((*p.xyz)[a]);
+		if (p.prev_xyz && context.dt_s > 0) {
+			const cv::Vec3d now(*p.xyz), before(*p.prev_xyz);
+			const cv::Vec3d relative = (now - before) / context.dt_s;
+			for (int a = 0; a < 3; ++a)
+				rel[static_cast<size_t>(a)].push_back(static_cast<float>(relative[a]));
+			if (context.curr_from_prev && context.world_from_curr) {
+				// Where a static point seen at `before` would be now; the difference is the point's own
+				// motion.
+				const cv::Vec3d moved = ((now - *context.curr_from_prev * before) / context.dt_s);
+				const cv::Vec3d in_world = context.world_from_curr->r * moved;
+				for (int a = 0; a < 3; ++a)
+					world[static_cast<size_t>(a)].push_back(static_cast<float>(in_world[a]));
+			}
+		}
+	}
+	c.box = cv::Rect2f(u0, v0, u1 - u0, v1 - v0);
+	c.centre = {median_of_copy(u), median_of_copy(v)};
+	c.flow = {median_of_copy(fu), median_of_copy(fv)};
+	c.residual = {median_of_copy(ru), median_of_copy(rv)};
+	constexpr size_t kMinWithDepth = 3;
+	if (xyz[0].size() >= kMinWithDepth) {
+		cv::Vec3d position, extent;
+		for (size_t a = 0; a < 3; ++a) {
+			position[static_cast<int>(a)] = median_of_copy(xyz[a]);
+			extent[static_cast<int>(a)] = percentile_of(xyz[a], 0.9) - percentile_of(xyz[a], 0.1);
+		}
+		c.position = position;
+		c.extent = extent;
+	}
+	if (rel[0].size() >= kMinWithDepth)
+		c.velocity = cv::Vec3d(median_of_copy(rel[0]), median_of_copy(rel[1]), median_of_copy(rel[2]));
+	if (world[0].size() >= kMinWithDepth)
+		c.world_velocity =
+			cv::Vec3d(median_of_copy(world[0]), median_of_copy(world[1]), median_of_copy(world[2]));
+	return c;
+}
+
+template <typename T>
+T blend(const std::optional<T> &old, const T &now, double weight)
+{
+	return old ? T(*old * (1 - weight) + now * weight) : now;
+}
+
+} // namespace
+
+std::vector<uint32_t> strong_motion(const std::vector<MotionPoint> &points, const GroupParams &params)
+{
+	std::vector<uint32_t> strong;
+	if (points.empty())
+		return strong;
+	double mean_u = 0, mean_v = 0;
+	size_t measured = 0; // a point without a prediction has a NaN residual and takes no part
+	for (const auto &p : points)
+		if (std::isfinite(p.residual.x) && std::isfinite(p.residual.y)) {
+			mean_u += std::abs(p.residual.x);
+			mean_v += std::abs(p.residual.y);
+			++measured;
+		}
+	if (measured == 0)
+		return strong;
+	mean_u /= static_cast<double>(measured);
+	mean_v /= static_cast<double>(measured);
+	for (size_t i = 0; i < points.size(); ++i) {
+		const cv::Point2f r = points[i].residual;
+		if ((std::abs(r.x) > mean_u || std::abs(r.y) > mean_v) && std::hypot(r.x, r.y) >= params.min_flow_px)
+			strong.push_back(static_cast<uint32_t>(i));
+	}
+	return strong;
+}
+
+GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemory *previous,
+			const GroupMotionContext &context, const GroupParams &params, AffinityPropagation &workspace)
+{
+	GroupOutput out;
+	out.group_of_point.assign(points.size(), -1);
+	out.strong = strong_motion(points, params);
+	// An even subsample beyond the cap keeps the clustering's cost bounded whatever the scene.
+	std::vector<uint32_t> chosen = out.strong;
+	if (params.max_points > 0 && chosen.size() > static_cast<size_t>(params.max_points)) {
+		std::vector<uint32_t> thinned;
+		const double step = static_cast<double>(chosen.size()) / params.max_points;
+		for (int k = 0; k < params.max_points; ++k)
+			thinned.push_back(chosen[static_cast<size_t>(k * step)]);
+		chosen = std::move(thinned);
+	}
+	// Seed 002's 6-d samples, each dimension over its scale: octave, row, column, disparity, flow u, flow v.
+	cv::Mat samples(static_cast<int>(chosen.size()), 6, CV_32F);
+	for (size_t s = 0; s < chosen.size(); ++s) {
+		const MotionPoint &p = points[chosen[s]];
+		float disparity = 0;
+		if (p.xyz && context.rig && (*p.xyz)[2] > 0)
+			disparity = static_cast<float>(context.rig->fx * context.rig->baseline_m / (*p.xyz)[2]);
+		float *row = samples.ptr<float>(static_cast<int>(s));
+		row[0] = static_cast<float>(p.octave / params.octave_scale);
+		row[1] = static_cast<float>(p.px.y / params.position_scale_px);
+		row[2] = static_cast<float>(p.px.x / params.position_scale_px);
+		row[3] = static_cast<float>(disparity / params.disparity_scale_px);
+		row[4] = static_cast<float>(p.flow.x / params.flow_scale_px);
+		row[5] = static_cast<float>(p.flow.y / params.flow_scale_px);
+	}
+	std::vector<Cluster> clusters;
+	if (!chosen.empty()) {
+		const AffinityResult &ap = workspace.cluster(samples, params.affinity);
+		out.clusters = ap.clusters;
+		out.ap_iterations = ap.iterations;
+		std::vector<std::vector<uint32_t>> by_exemplar(chosen.size());
+		for (size_t s = 0; s < chosen.size(); ++s)
+			by_exemplar[static_cast<size_t>(ap.exemplar[s])].push_back(chosen[s]);
+		for (auto &members : by_exemplar)
+			if (members.size() >= static_cast<size_t>(std::max(1, params.min_points)))
+				clusters.push_back(measure(std::move(members), points, context));
+	}
+
+	// Tracks: each previous group predicted forward by its image velocity; greedy one-to-one by distance.
+	const std::vector<TrackedGroup> none;
+	const std::vector<TrackedGroup> &before = previous != nullptr ? previous->groups : none;
+	out.memory.next_id = previous != nullptr ? previous->next_id : 1;
+	struct Candidate {
+		double distance;
+		size_t cluster, track;
+	};
+	std::vector<Candidate> candidates;
+	for (size_t c = 0; c < clusters.size(); ++c)
+		for (size_t t = 0; t < before.size(); ++t) {
+			const cv::Point2f predicted =
+				before[t].centre + before[t].image_velocity_pxps * static_cast<float>(context.dt_s) *
+							   static_cast<float>(1 + before[t].missed_frames);
+			const double d = cv::norm(clusters[c].centre - predicted);
+			const double gate = std::max(params.association_px,
+						     0.5 * std::hypot(before[t].box.width, before[t].box.height));
+			if (d <= gate)
+				candidates.push_back({d, c, t});
+		}
+	std::sort(candidates.begin(), candidates.end(),
+		  [](const Candidate &a, const Candidate &b) { return a.distance < b.distance; });
+	std::vector<int> track_of_cluster(clusters.size(), -1);
+	std::vector<uint8_t> track_taken(before.size(), 0);
+	for (const auto &cand : candidates)
+		if (track_of_cluster[cand.cluster] < 0 && !track_taken[cand.track]) {
+			track_of_cluster[cand.cluster] = static_cast<int>(cand.track);
+			track_taken[cand.track] = 1;
+		}
+	const double fps = context.dt_s > 0 ? 1.0 / context.dt_s : 0;
+	for (size_t c = 0; c < clusters.size(); ++c) {
+		const Cluster &cluster = clusters[c];
+		TrackedGroup g;
+		const TrackedGroup *old =
+			track_of_cluster[c] >= 0 ? &before[static_cast<size_t>(track_of_cluster[c])] : nullptr;
+		g.id = old != nullptr ? old->id : out.memory.next_id++;
+		g.age_frames = old != nullptr ? old->age_frames + 1 : 1;
+		g.box = cluster.box;
+		g.centre = cluster.centre;
+		const cv::Point2f image_velocity = cluster.flow * static_cast<float>(fps);
+		g.image_velocity_pxps = old != nullptr
+						? old->image_velocity_pxps * static_cast<float>(1 - params.smoothing) +
+							  image_velocity * static_cast<float>(params.smoothing)
+						: image_velocity;
+		if (cluster.velocity)
+			g.velocity_mps = blend(old != nullptr ? old->velocity_mps : std::nullopt, *cluster.velocity,
+					       params.smoothing);
+		if (cluster.world_velocity)
+			g.world_velocity_mps = blend(old != nullptr ? old->world_velocity_mps : std::nullopt,
+						     *cluster.world_velocity, params.smoothing);
+		out.memory.groups.push_back(g);
+		if (g.age_frames < params.min_age_frames)
+			continue;
+		TargetGroup published;
+		published.id = g.id;
+		published.box_px = {g.box.x, g.box.y, g.box.x + g.box.width, g.box.y + g.box.height};
+		published.point_count = static_cast<int>(cluster.members.size());
+		published.age_frames = g.age_frames;
+		published.image_velocity_pxps = {g.image_velocity_pxps.x, g.image_velocity_pxps.y};
+		if (cluster.position)
+			published.position_m = array_of(*cluster.position);
+		if (cluster.extent)
+			published.extent_m = array_of(*cluster.extent);
+		if (g.velocity_mps)
+			published.velocity_mps = array_of(*g.velocity_mps);
+		if (g.world_velocity_mps) {
+			const cv::Vec3d &w = *g.world_velocity_mps;
+			published.world_velocity_mps = array_of(w);
+			published.speed_mps = cv::norm(w);
+			published.heading_rad = std::atan2(w[0], w[2]);
+		}
+		const int index = static_cast<int>(out.groups.size());
+		out.groups.push_back(published);
+		for (const uint32_t i : cluster.members)
+			out.group_of_point[i] = index;
+		// Points inside the box moving with the group belong to it too (they may have missed the strong set).
+		const double tolerance = std::max(params.label_tolerance_px, 0.5 * cv::norm(cluster.residual));
+		for (size_t i = 0; i < points.size(); ++i)
+			if (out.group_of_point[i] < 0 && g.box.contains(points[i].px) &&
+			    cv::norm(points[i].residual - cluster.residual) <= tolerance &&
+			    cv::norm(cluster.residual) >= params.min_flow_px)
+				out.group_of_point[i] = index;
+	}
+	// Groups not seen this frame are remembered a little while, so a short occlusion keeps the id.
+	for (size_t t = 0; t < before.size(); ++t)
+		if (!track_taken[t] && before[t].missed_frames < params.max_missed_frames) {
+			TrackedGroup kept = before[t];
+			++kept.missed_frames;
+			out.memory.groups.push_back(kept);
+		}
+	return out;
+}
+
+} // namespace stereod::vision

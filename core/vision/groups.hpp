@@ -1,0 +1,96 @@
+#pragma once
+// Moving-target groups (seed 002 sections 3.2-3.3): the points whose motion the camera's own motion does not
+// explain, split from the rest by the seed's mean-flow thresholds, clustered by Affinity Propagation on the
+// seed's 6-d samples, and followed from frame to frame as groups with a stable id, a box, and, where depth
+// exists, a 3D position, extent and velocity.
+#include <cstdint>
+#include <optional>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "core/geometry/rig.hpp"
+#include "core/result.hpp"
+#include "core/vision/affinity.hpp"
+
+namespace stereod::vision {
+
+struct GroupParams {
+	bool enabled = true;
+	/// A point moves strongly when its residual flow (observed minus what the camera's motion predicts)
+	/// exceeds the frame's mean in u or in v (seed 002) and is at least this long, pixels per frame.
+	double min_flow_px = 1.0;
+	/// Normalisation of the 6-d samples: one unit of each is "still the same group".
+	double position_scale_px = 40;
+	double flow_scale_px = 1.5;
+	double disparity_scale_px = 4;
+	double octave_scale = 2;
+	int max_points = 300; ///< strong points clustered per frame at most (an even subsample beyond)
+	int min_points = 5;   ///< smaller clusters are not groups
+	AffinityParams affinity;
+	/// Tracks: a group is matched to the nearest predicted group centre within this distance (or half its
+	/// box's diagonal if larger), kept unseen this many frames, published from this age on.
+	double association_px = 60;
+	int max_missed_frames = 3;
+	int min_age_frames = 2;
+	double smoothing = 0.5; ///< weight of the new measurement in the velocity averages
+	/// Labels: a point inside a published group's box whose residual agrees with the group's (within the
+	/// larger of this and half the group's residual) becomes dynamic.
+	bool label_points = false;
+	double label_tolerance_px = 1.0;
+};
+
+/// One temporally matched point as the grouping sees it.
+struct MotionPoint {
+	cv::Point2f px;			   ///< in this frame
+	cv::Point2f flow;		   ///< observed, this frame minus the previous, pixels
+	cv::Point2f residual;		   ///< observed minus the static scene's predicted motion
+	int octave = 0;			   ///< pyramid level of its keypoint (the seed's "scale")
+	std::optional<cv::Vec3f> xyz;	   ///< this frame's camera, metres
+	std::optional<cv::Vec3f> prev_xyz; ///< the previous frame's camera, metres
+};
+
+/// A group followed across frames.
+struct TrackedGroup {
+	int id = 0;
+	int age_frames = 0;
+	int missed_frames = 0;
+	cv::Rect2f box;
+	cv::Point2f centre;
+	cv::Point2f image_velocity_pxps;
+	std::optional<cv::Vec3d> world_velocity_mps;
+	std::optional<cv::Vec3d> velocity_mps;
+};
+
+struct GroupMemory {
+	std::vector<TrackedGroup> groups;
+	int next_id = 1;
+};
+
+/// What the camera did between the frames, for velocities: the interval, and the metric pose when known.
+struct GroupMotionContext {
+	double dt_s = 0;
+	std::optional<geometry::Pose> curr_from_prev;
+	std::optional<geometry::Pose> world_from_curr;
+	std::optional<geometry::StereoRig> rig; ///< for disparities
+};
+
+struct GroupOutput {
+	GroupMemory memory;
+	std::vector<TargetGroup> groups; ///< the published ones
+	std::vector<uint32_t> strong;	 ///< indices of the strongly moving points
+	std::vector<int> group_of_point; ///< per point: index into `groups`, or -1
+	int clusters = 0;		 ///< AP clusters this frame (before the size and age rules)
+	int ap_iterations = 0;
+};
+
+/// The seed's split: indices of points whose residual exceeds the mean |u| or mean |v| residual of all of
+/// them and is at least `min_flow_px` long.
+std::vector<uint32_t> strong_motion(const std::vector<MotionPoint> &points, const GroupParams &params);
+
+/// Groups of this frame from its points and the previous frame's memory (null on the first frame).
+/// `workspace` keeps Affinity Propagation's buffers between calls.
+GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemory *previous,
+			const GroupMotionContext &context, const GroupParams &params, AffinityPropagation &workspace);
+
+} // namespace stereod::vision
