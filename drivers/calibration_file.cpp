@@ -82,15 +82,17 @@ void write_calibration(const std::string &path, const geometry::PairCalibration 
 	if (!file.isOpened())
 		throw CalibrationError(path +
 				       ": cannot be written (the extension chooses the format: .yml, .xml, .json)");
-	// The rectification make_rectification computes, so other tools reading the file get the same maps.
-	cv::Mat r1, r2, p1, p2, q;
-	cv::stereoRectify(c.k_left, c.distortion_left, c.k_right, c.distortion_right, image, c.r, c.t, r1, r2, p1, p2,
-			  q, cv::CALIB_ZERO_DISPARITY, 0, image);
+	// The rectification the daemon uses, so other tools reading the file get the same maps; Q (disparity
+	// to depth) as cv::stereoRectify forms it with zero disparity at infinity.
+	const auto rect = geometry::rectifying_for(c, image);
+	const double f = rect.p_left(0, 0), tx = rect.p_right(0, 3) / rect.p_right(0, 0);
+	const cv::Matx44d q(1, 0, 0, -rect.p_left(0, 2), 0, 1, 0, -rect.p_left(1, 2), 0, 0, 0, f, 0, 0, -1 / tx, 0);
 	file << "image_width" << image.width << "image_height" << image.height;
 	file << "M1" << cv::Mat(c.k_left) << "D1" << cv::Mat(c.distortion_left, true).reshape(1, 1);
 	file << "M2" << cv::Mat(c.k_right) << "D2" << cv::Mat(c.distortion_right, true).reshape(1, 1);
 	file << "R" << cv::Mat(c.r) << "T" << cv::Mat(c.t);
-	file << "R1" << r1 << "R2" << r2 << "P1" << p1 << "P2" << p2 << "Q" << q;
+	file << "R1" << cv::Mat(rect.r_left) << "R2" << cv::Mat(rect.r_right) << "P1" << cv::Mat(rect.p_left) << "P2"
+	     << cv::Mat(rect.p_right) << "Q" << cv::Mat(q);
 	file << "rms_px" << report.rms_px << "left_rms_px" << report.left_rms_px << "right_rms_px"
 	     << report.right_rms_px << "pairs" << report.pairs << "square_size_m" << report.square_size_m;
 }

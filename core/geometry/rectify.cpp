@@ -113,24 +113,19 @@ std::vector<std::string> calibration_problems(const PairCalibration &c, cv::Size
 	return problems;
 }
 
+PairCalibration::Rectifying rectifying_for(const PairCalibration &c, cv::Size image)
+{
+	if (c.rectifying)
+		return *c.rectifying;
+	cv::Mat r1, r2, p1, p2, q;
+	cv::stereoRectify(c.k_left, distortion(c.distortion_left), c.k_right, distortion(c.distortion_right), image,
+			  c.r, c.t, r1, r2, p1, p2, q, cv::CALIB_ZERO_DISPARITY, 0, image);
+	return {cv::Matx33d(r1), cv::Matx33d(r2), cv::Matx34d(p1), cv::Matx34d(p2)};
+}
+
 Rectification make_rectification(const PairCalibration &c, cv::Size image)
 {
-	cv::Matx33d r_left, r_right;
-	cv::Matx34d p_left, p_right;
-	if (c.rectifying) {
-		r_left = c.rectifying->r_left;
-		r_right = c.rectifying->r_right;
-		p_left = c.rectifying->p_left;
-		p_right = c.rectifying->p_right;
-	} else {
-		cv::Mat r1, r2, p1, p2, q;
-		cv::stereoRectify(c.k_left, distortion(c.distortion_left), c.k_right, distortion(c.distortion_right),
-				  image, c.r, c.t, r1, r2, p1, p2, q, cv::CALIB_ZERO_DISPARITY, 0, image);
-		r_left = r1;
-		r_right = r2;
-		p_left = p1;
-		p_right = p2;
-	}
+	const auto [r_left, r_right, p_left, p_right] = rectifying_for(c, image);
 	Rectification out;
 	out.size = image;
 	cv::initUndistortRectifyMap(c.k_left, distortion(c.distortion_left), r_left, p_left.get_minor<3, 3>(0, 0),

@@ -34,6 +34,10 @@ struct PairCalibration {
 /// does not agree with the pose. Each entry is one sentence for the user.
 std::vector<std::string> calibration_problems(const PairCalibration &calibration, cv::Size image);
 
+/// The calibration's own rectification, or the one cv::stereoRectify computes for `image` (alpha 0, zero
+/// disparity at infinity): what make_rectification builds its maps from and a calibration file records.
+PairCalibration::Rectifying rectifying_for(const PairCalibration &calibration, cv::Size image);
+
 /// Remap tables for both eyes and the rectified rig they produce.
 struct Rectification {
 	cv::Size size;

@@ -4,17 +4,10 @@
 #include <cmath>
 #include <numeric>
 
+#include "core/vision/stereo.hpp"
+
 namespace stereod::vision {
 namespace {
-
-float median_of_copy(std::vector<float> v)
-{
-	if (v.empty())
-		return 0;
-	const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
-	std::nth_element(v.begin(), mid, v.end());
-	return *mid;
-}
 
 float percentile_of(std::vector<float> &v, double q)
 {
@@ -78,24 +71,23 @@ Cluster measure(std::vector<uint32_t> members, const std::vector<MotionPoint> &p
 		}
 	}
 	c.box = cv::Rect2f(u0, v0, u1 - u0, v1 - v0);
-	c.centre = {median_of_copy(u), median_of_copy(v)};
-	c.flow = {median_of_copy(fu), median_of_copy(fv)};
-	c.residual = {median_of_copy(ru), median_of_copy(rv)};
+	c.centre = {median_of(u), median_of(v)};
+	c.flow = {median_of(fu), median_of(fv)};
+	c.residual = {median_of(ru), median_of(rv)};
 	constexpr size_t kMinWithDepth = 3;
 	if (xyz[0].size() >= kMinWithDepth) {
 		cv::Vec3d position, extent;
 		for (size_t a = 0; a < 3; ++a) {
-			position[static_cast<int>(a)] = median_of_copy(xyz[a]);
+			position[static_cast<int>(a)] = median_of(xyz[a]);
 			extent[static_cast<int>(a)] = percentile_of(xyz[a], 0.9) - percentile_of(xyz[a], 0.1);
 		}
 		c.position = position;
 		c.extent = extent;
 	}
 	if (rel[0].size() >= kMinWithDepth)
-		c.velocity = cv::Vec3d(median_of_copy(rel[0]), median_of_copy(rel[1]), median_of_copy(rel[2]));
+		c.velocity = cv::Vec3d(median_of(rel[0]), median_of(rel[1]), median_of(rel[2]));
 	if (world[0].size() >= kMinWithDepth)
-		c.world_velocity =
-			cv::Vec3d(median_of_copy(world[0]), median_of_copy(world[1]), median_of_copy(world[2]));
+		c.world_velocity = cv::Vec3d(median_of(world[0]), median_of(world[1]), median_of(world[2]));
 	return c;
 }
 
