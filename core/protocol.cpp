@@ -98,8 +98,10 @@ std::string frame_message(const FrameResult &result)
 		const EgoMotion &ego = *result.ego;
 		json e = {{"inliers", ego.inliers}};
 		e["homography"] = ego.homography ? json(*ego.homography) : json(nullptr);
-		if (ego.homography)
+		if (ego.homography) {
 			e["homography_inliers"] = ego.homography_inliers;
+			e["homography_refined"] = ego.homography_refined;
+		}
 		if (ego.valid) {
 			// 1e-7: a tenth of a micrometre, far below any pose's accuracy, and short on the wire.
 			const auto matrix = [](const std::optional<std::array<double, 16>> &m) {
@@ -194,6 +196,7 @@ FrameResult parse_frame_message(const json &message)
 		if (ego.contains("homography") && !ego.at("homography").is_null()) {
 			e.homography = ego.at("homography").get<std::array<double, 9>>();
 			e.homography_inliers = ego.value("homography_inliers", e.inliers);
+			e.homography_refined = ego.value("homography_refined", true);
 		}
 		if (ego.contains("valid")) {
 			e.valid = ego.at("valid").get<bool>();

@@ -35,6 +35,9 @@ struct EgoMotion {
 	std::optional<std::array<double, 9>> homography; ///< maps previous-frame pixels to this frame's, row-major
 	int inliers = 0; ///< points the pose (stereo) or else the final homography was fitted to
 	int homography_inliers = 0;
+	/// False when the seed's second fit (from the refined static set) failed and `homography` is the first,
+	/// rougher one.
+	bool homography_refined = true;
 	/// Stereo/RGB-D: whether the pose below was estimated for this frame; when not, `reason` says why and
 	/// T_world_curr carries the last known pose on.
 	std::optional<bool> valid;

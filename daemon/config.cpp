@@ -434,7 +434,8 @@ const std::vector<Option> &options()
 			[](DaemonConfig &c) -> double & { return c.motion.classifier.reprojection_sigma_px; }, 0.05,
 			20));
 		o.push_back(number(
-			"classifier", "reprojection_chi2", "Mahalanobis gate on eq. 1 (chi-square, 4 dof)",
+			"classifier", "reprojection_chi2",
+			"gate on eq. 1 over sigma^2 (chi-square, 2 dof: 9.21 is 99%)",
 			[](DaemonConfig &c) -> double & { return c.motion.classifier.reprojection_chi2; }, 0.1, 1000));
 		o.push_back(number(
 			"classifier", "static_theta", "eq. 5 static window, u: du^2 < theta * Umax",
@@ -579,6 +580,10 @@ const std::vector<Option> &options()
 		o.push_back(number(
 			"memory", "chi2", "gate on the remembered own motion (chi-square, 2 dof)",
 			[](DaemonConfig &c) -> double & { return c.motion.temporal.chi2; }, 0.1, 1000));
+		o.push_back(number(
+			"memory", "jump_chi2",
+			"a frame's motion this far from its track's mean breaks the track (2 dof)",
+			[](DaemonConfig &c) -> double & { return c.motion.temporal.jump_chi2; }, 0.1, 1000));
 		o.push_back(number(
 			"memory", "min_age", "frames a point is followed before its memory may label it",
 			[](DaemonConfig &c) -> int & { return c.motion.temporal.min_age; }, 1, 10000));

@@ -25,6 +25,7 @@
 #include "drivers/replay/recording.hpp"
 #include "tools/common.hpp"
 #include "tools/evaluation.hpp"
+#include "tools/group_eval.hpp"
 #include "tools/subcommands.hpp"
 
 using namespace stereod;
@@ -206,6 +207,65 @@ cv::Mat load_mask(const fs::path &dir, uint64_t seq)
 		if (fs::exists(candidate))
 			return cv::imread(candidate.string(), cv::IMREAD_GRAYSCALE);
 	return {};
+}
+
+/// Moving-target groups against the truth's movers (tools/group_eval.hpp).
+int eval_groups(const std::string &results_path, const std::string &truth_dir, const std::string &name, bool json_out)
+{
+	std::map<uint64_t, std::string> truth_lines;
+	{
+		std::ifstream in(fs::path(truth_dir) / "truth.ndjson");
+		if (!in) {
+			std::cerr << "stereoctl eval --groups: " << truth_dir << "/truth.ndjson: cannot read\n";
+			return 1;
+		}
+		std::string line;
+		while (std::getline(in, line))
+			if (!line.empty())
+				truth_lines[nlohmann::json::parse(line).at("seq").get<uint64_t>()] = line;
+	}
+	tools::GroupScore score;
+	// A mover counts as in view from 400 pixels on (a person 20 x 20 px): smaller ones carry too few
+	// features to be grouped at all.
+	constexpr int kMinPixels = 400;
+	for (const auto &[seq, result] : tools::read_results(results_path)) {
+		const auto truth = truth_lines.find(seq);
+		const cv::Mat mask = load_mask(truth_dir, seq);
+		if (truth == truth_lines.end() || mask.empty())
+			continue;
+		score.add(result, mask, tools::visible_movers(mask, truth->second, kMinPixels));
+	}
+	if (score.frames == 0) {
+		std::cerr << "stereoctl eval --groups: no frame of " << results_path << " has truth in " << truth_dir
+			  << "\n";
+		return 1;
+	}
+	if (json_out) {
+		const auto ratio = [](uint64_t a, uint64_t b) {
+			return b > 0 ? static_cast<double>(a) / static_cast<double>(b) : 0.0;
+		};
+		std::cout << nlohmann::json{{"name", name},
+					    {"frames", score.frames},
+					    {"frames_separated", score.frames_separated},
+					    {"count_exact", ratio(score.count_exact, score.frames_separated)},
+					    {"groups", score.groups},
+					    {"groups_on_movers", ratio(score.groups_on_movers, score.groups)},
+					    {"groups_without_movers", score.groups_without_movers},
+					    {"movers_covered", ratio(score.movers_covered, score.mover_views)},
+					    {"centroid_error_m", tools::median(score.centroid_error_m)},
+					    {"speed_relative_error", tools::median(score.speed_relative_error)},
+					    {"speed_within_10_percent",
+					     tools::fraction_below(score.speed_relative_error, 0.1)},
+					    {"heading_error_deg", tools::median(score.heading_error_deg)},
+					    {"heading_within_15_deg",
+					     tools::fraction_below(score.heading_error_deg, 15)},
+					    {"id_switches", score.id_switches}}
+				     .dump()
+			  << "\n";
+	} else {
+		std::cout << "\n" << tools::group_score_table(name, score);
+	}
+	return 0;
 }
 
 int eval(const std::string &results_path, const std::string &truth_dir, const std::string &name, int border_px,
@@ -543,8 +603,10 @@ int main(int argc, char **argv)
 	eval_cmd->add_option("--min-coverage", eval_coverage, "second row: frames whose movers cover at least this");
 	eval_cmd->add_option("--per-frame", eval_csv, "write per-frame scores to this CSV");
 	eval_cmd->add_flag("--json", eval_json, "print one JSON object instead of the table");
-	bool eval_per_mover = false;
+	bool eval_per_mover = false, eval_groups_only = false;
 	eval_cmd->add_flag("--per-mover", eval_per_mover, "also a table of labels per mover (mask id)");
+	eval_cmd->add_flag("--groups", eval_groups_only,
+			   "score the moving-target groups against the truth's movers instead of the labels");
 
 	auto *render_cmd = app.add_subcommand("render", "draw results onto the input's frames");
 	tools::SourceOptions render_opts;
@@ -564,6 +626,7 @@ int main(int argc, char **argv)
 
 	tools::add_devices_command(app);
 	tools::add_export_command(app);
+	tools::add_map_command(app);
 	tools::add_calibrate_command(app);
 
 	try {
@@ -591,6 +654,8 @@ int main(int argc, char **argv)
 				return 2;
 			}
 			int rc = 0;
+			if (!eval_truth.empty() && eval_groups_only)
+				return eval_groups(eval_results, eval_truth, eval_name, eval_json);
 			if (!eval_truth.empty())
 				rc = eval(eval_results, eval_truth, eval_name, eval_border, eval_coverage, eval_csv,
 					  eval_json, eval_per_mover);

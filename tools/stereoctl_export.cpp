@@ -44,9 +44,12 @@ int export_recording(const std::string &input, const std::string &output, const 
 	std::ofstream right_stamps;
 	if (kitti && h.geometry.stereo)
 		right_stamps.open(root / "image_03" / "timestamps.txt");
+	// Which frames a camera delivered whole: tools comparing pixels skip the others (stereod records
+	// incomplete frames too, so a lost packet is visible in the recording rather than hidden).
+	std::ofstream statuses(root / "status.txt");
 	StereoFrame frame;
 	frame.allocate(h.geometry);
-	uint64_t n = 0;
+	uint64_t n = 0, not_ok = 0;
 	while (reader.next(frame)) {
 		char name[32];
 		std::snprintf(name, sizeof(name), kitti ? "%010llu.png" : "%06llu.png",
@@ -64,11 +67,15 @@ int export_recording(const std::string &input, const std::string &output, const 
 			std::snprintf(seconds, sizeof(seconds), "%.9f", static_cast<double>(frame.device_ns) * 1e-9);
 			left_stamps << seconds << "\n";
 		}
+		statuses << to_string(frame.status) << "\n";
+		not_ok += frame.status != FrameStatus::Ok;
 		++n;
 	}
-	std::cerr << "stereoctl export: " << n << " frames -> " << output << " (" << layout << "); "
-		  << reader.report().describe() << "\n";
-	if (!left_stamps)
+	std::cerr << "stereoctl export: " << n << " frames -> " << output << " (" << layout << "); ";
+	if (not_ok > 0)
+		std::cerr << not_ok << " of them incomplete or corrupt (status.txt); ";
+	std::cerr << reader.report().describe() << "\n";
+	if (!left_stamps || !statuses)
 		throw std::runtime_error(output + ": cannot write timestamps");
 	return n > 0 ? 0 : 1;
 }

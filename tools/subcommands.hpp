@@ -15,6 +15,8 @@ void add_devices_command(CLI::App &app);
 void add_calibrate_command(CLI::App &app);
 /// `stereoctl export`: a recording to PNG pairs (the `folder` layout) or a KITTI raw-data drive folder.
 void add_export_command(CLI::App &app);
+/// `stereoctl map`: the static scene, movers left out, as a PLY point cloud (issue 15's static map).
+void add_map_command(CLI::App &app);
 
 /// `stereoctl eval --poses`: the estimated trajectory against TUM or KITTI ground truth (ATE, RPE, drift).
 struct TrajectoryEvalOptions {

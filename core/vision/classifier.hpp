@@ -25,10 +25,12 @@ namespace stereod::vision {
 struct ClassifierParams {
 	double ransac_threshold_px = 3.0;   ///< RANSAC inlier distance for both homography fits
 	double reprojection_sigma_px = 1.0; ///< feature position noise (isotropic Gaussian) for eq. 1
-	double reprojection_chi2 = 13.28;   ///< Mahalanobis gate on eq. 1 (chi-square, 4 dof, 99%)
-	double static_theta = 0.9;	    ///< eq. 5 static window: du^2 < theta * Umax
-	double static_eta = 0.9;	    ///< eq. 5 static window: dv^2 < eta * Vmax
-	double dynamic_theta = 1.0;	    ///< eq. 5 on the dynamic candidates' motion relative to the scene
+	/// Gate on eq. 1 over sigma^2. Eq. 1 (the geometric re-projection error of a homography, codimension 2)
+	/// is sigma^2 chi-square with 2 degrees of freedom for a point the homography explains: 9.21 is its 99%.
+	double reprojection_chi2 = 9.21;
+	double static_theta = 0.9;  ///< eq. 5 static window: du^2 < theta * Umax
+	double static_eta = 0.9;    ///< eq. 5 static window: dv^2 < eta * Vmax
+	double dynamic_theta = 1.0; ///< eq. 5 on the dynamic candidates' motion relative to the scene
 	double dynamic_eta = 1.0;
 	double area_floor_px = 2.0;	      ///< windows never shrink below this many pixels (still camera)
 	double dynamic_max_motion_px = 150.0; ///< a mover cannot move farther than this between frames
@@ -61,8 +63,11 @@ std::optional<HomographyFit> fit_homography(std::span<const cv::Point2f> from, s
 
 cv::Point2f project(const cv::Matx33d &h, cv::Point2f p);
 
-/// Eq. 1: d(x, H^-1 x')^2 + d(x', H x)^2, in squared pixels.
-double reprojection_error(const cv::Matx33d &h, const cv::Matx33d &h_inv, cv::Point2f prev, cv::Point2f cur);
+/// Eq. 1 as the seed writes it: d(x, x^)^2 + d(x', x^')^2, the squared distances from the measured points to
+/// the closest pair (x^, x^' = H x^) the homography allows, in squared pixels. Computed to first order (the
+/// Sampson error, Hartley & Zisserman 4.2.6): with r = x' - H(x) and A = dH(x)/dx, r^T (A A^T + I)^-1 r.
+/// For H near the identity that is |r|^2 / 2: half the one-way transfer error, a quarter of the symmetric one.
+double reprojection_error(const cv::Matx33d &h, cv::Point2f prev, cv::Point2f cur);
 
 /// Eq. 1 against the Mahalanobis gate: true for a static candidate.
 bool passes_reprojection(double error_px2, const ClassifierParams &params);
@@ -102,6 +107,11 @@ struct ClassificationCounts {
 struct Classification {
 	std::vector<PointLabel> labels;	       ///< one per input pair
 	std::optional<cv::Matx33d> homography; ///< the refined frame-to-frame homography (step 5)
+	/// False when step 5's fit failed (too few refined static points) and `homography` is step 1's.
+	bool homography_refined = false;
+	/// True when the points the motion memory calls moving left too few to fit step 1, so it was fitted
+	/// over every match instead (the memory is then not trusted for this frame's fits).
+	bool fitted_with_known_movers = false;
 	std::vector<uint8_t> texture_agrees; ///< per pair: eq. 3 (within the tolerance) < T; empty without a homography
 	int homography_inliers = 0;
 	ClassificationCounts counts;

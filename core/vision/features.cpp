@@ -1,6 +1,8 @@
 #include "core/vision/features.hpp"
 
 #include <algorithm>
+#include <cmath>
+#include <limits>
 
 #include <opencv2/features2d.hpp>
 #include <opencv2/imgproc.hpp>
@@ -9,6 +11,9 @@ namespace stereod::vision {
 
 cv::Vec3f sample_colour(const cv::Mat &image, cv::Point2f at, int radius)
 {
+	if (image.empty() || !std::isfinite(at.x) || !std::isfinite(at.y))
+		return cv::Vec3f::all(std::numeric_limits<float>::quiet_NaN());
+	radius = std::max(radius, 0);
 	const int cx = std::clamp(cvRound(at.x), 0, image.cols - 1);
 	const int cy = std::clamp(cvRound(at.y), 0, image.rows - 1);
 	const int x0 = std::max(cx - radius, 0), x1 = std::min(cx + radius, image.cols - 1);
@@ -33,7 +38,11 @@ cv::Vec3f sample_colour(const cv::Mat &image, cv::Point2f at, int radius)
 std::vector<cv::KeyPoint> bucket_keypoints(std::vector<cv::KeyPoint> keypoints, cv::Size image_size, int grid_cols,
 					   int grid_rows, int max_total)
 {
-	const int cells = std::max(grid_cols * grid_rows, 1);
+	if (image_size.width <= 0 || image_size.height <= 0 || max_total <= 0)
+		return {};
+	grid_cols = std::max(grid_cols, 1);
+	grid_rows = std::max(grid_rows, 1);
+	const int cells = grid_cols * grid_rows;
 	const int per_cell = std::max(max_total / cells, 1);
 	std::vector<std::vector<cv::KeyPoint>> buckets(static_cast<size_t>(cells));
 	for (const auto &kp : keypoints) {
@@ -45,21 +54,27 @@ std::vector<cv::KeyPoint> bucket_keypoints(std::vector<cv::KeyPoint> keypoints, 
 					   0, grid_rows - 1);
 		buckets[static_cast<size_t>(row * grid_cols + col)].push_back(kp);
 	}
+	const auto stronger = [](const cv::KeyPoint &a, const cv::KeyPoint &b) { return a.response > b.response; };
 	std::vector<cv::KeyPoint> kept;
 	kept.reserve(static_cast<size_t>(max_total));
 	std::vector<cv::KeyPoint> spare;
 	for (auto &bucket : buckets) {
-		std::sort(bucket.begin(), bucket.end(),
-			  [](const cv::KeyPoint &a, const cv::KeyPoint &b) { return a.response > b.response; });
+		std::sort(bucket.begin(), bucket.end(), stronger);
 		const auto take = std::min(bucket.size(), static_cast<size_t>(per_cell));
 		kept.insert(kept.end(), bucket.begin(), bucket.begin() + static_cast<std::ptrdiff_t>(take));
 		spare.insert(spare.end(), bucket.begin() + static_cast<std::ptrdiff_t>(take), bucket.end());
+	}
+	// More cells than the budget (one each is the least a cell gets): the strongest winners stay.
+	if (kept.size() > static_cast<size_t>(max_total)) {
+		std::partial_sort(kept.begin(), kept.begin() + max_total, kept.end(), stronger);
+		kept.resize(static_cast<size_t>(max_total));
+		return kept;
 	}
 	// Cells without texture leave budget unused; give it to the strongest of the rest.
 	if (kept.size() < static_cast<size_t>(max_total) && !spare.empty()) {
 		const auto extra = std::min(spare.size(), static_cast<size_t>(max_total) - kept.size());
 		std::partial_sort(spare.begin(), spare.begin() + static_cast<std::ptrdiff_t>(extra), spare.end(),
-				  [](const cv::KeyPoint &a, const cv::KeyPoint &b) { return a.response > b.response; });
+				  stronger);
 		kept.insert(kept.end(), spare.begin(), spare.begin() + static_cast<std::ptrdiff_t>(extra));
 	}
 	return kept;
@@ -68,6 +83,8 @@ std::vector<cv::KeyPoint> bucket_keypoints(std::vector<cv::KeyPoint> keypoints, 
 FrameFeatures extract_features(const cv::Mat &image, const FeatureParams &params, int colour_radius,
 			       const cv::Mat *grey_given)
 {
+	if (image.empty())
+		return {}; // nothing to detect (a zero-sized frame reaches here only from a broken source)
 	cv::Mat grey;
 	if (grey_given != nullptr)
 		grey = *grey_given;

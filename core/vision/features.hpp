@@ -40,9 +40,11 @@ struct FrameFeatures {
 };
 
 /// Mean colour (B,G,R; grey images repeat the one channel) of the patch around `at`, clamped to the image.
+/// An empty image has no colour: NaN, which fails every texture comparison.
 cv::Vec3f sample_colour(const cv::Mat &image, cv::Point2f at, int radius);
 
-/// Keeps at most `max_total` keypoints, spread over a grid: each cell keeps its strongest.
+/// Keeps at most `max_total` keypoints, spread over a grid: each cell keeps its strongest. With fewer
+/// keypoints allowed than cells, the strongest cell winners are kept. Nothing for an empty image.
 std::vector<cv::KeyPoint> bucket_keypoints(std::vector<cv::KeyPoint> keypoints, cv::Size image_size, int grid_cols,
 					   int grid_rows, int max_total);
 

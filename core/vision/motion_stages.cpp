@@ -391,6 +391,7 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 				h[static_cast<size_t>(r * 3 + c)] = (*classification.homography)(r, c);
 		ego.homography = h;
 		ego.homography_inliers = classification.homography_inliers;
+		ego.homography_refined = classification.homography_refined;
 		ego.inliers = classification.homography_inliers;
 	}
 	if (metric) {

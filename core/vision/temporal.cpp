@@ -18,7 +18,6 @@ TrackSet follow_tracks(const TrackSet *prev, const FollowInput &input, const Cla
 	double lambda = 0;
 	if (prev != nullptr && params.window_s > 0 && input.t_ns > prev->t_ns)
 		lambda = std::exp(-static_cast<double>(input.t_ns - prev->t_ns) * 1e-9 / params.window_s);
-	const double sigma2 = classifier.reprojection_sigma_px * classifier.reprojection_sigma_px;
 	const double max_motion2 = classifier.dynamic_max_motion_px * classifier.dynamic_max_motion_px;
 	std::vector<bool> prev_taken(prev != nullptr ? prev->by_keypoint.size() : 0, false);
 
@@ -39,12 +38,9 @@ TrackSet follow_tracks(const TrackSet *prev, const FollowInput &input, const Cla
 		if (input.texture_agrees[i] == 0)
 			continue;
 		const TrackState &before = prev->by_keypoint[p];
-		if (before.count > 0) {
-			// A jump away from the track's own recent motion is a mismatch onto a look-alike, not motion.
-			const cv::Point2f innovation = own - before.motion / before.count;
-			if (static_cast<double>(innovation.dot(innovation)) / sigma2 >= classifier.reprojection_chi2)
-				continue;
-		}
+		// A jump away from the track's own recent motion is a mismatch onto a look-alike, not motion.
+		if (before.count > 0 && jump_statistic(before, own, classifier) >= params.jump_chi2)
+			continue;
 		prev_taken[p] = true;
 		TrackState &after = out.by_keypoint[c];
 		after.id = before.id;
@@ -78,6 +74,15 @@ std::optional<std::vector<cv::Point2f>> predict_positions(const TrackSet &tracks
 		predicted[i] = project(*tracks.homography, keypoints[i].pt) + own;
 	}
 	return predicted;
+}
+
+double jump_statistic(const TrackState &before, cv::Point2f own, const ClassifierParams &classifier)
+{
+	const cv::Point2f innovation = own - before.motion / before.count;
+	const double sigma2 = classifier.reprojection_sigma_px * classifier.reprojection_sigma_px;
+	const double count = static_cast<double>(before.count);
+	const double variance = 2.0 * sigma2 * (1.0 + static_cast<double>(before.noise_weight) / (count * count));
+	return static_cast<double>(innovation.dot(innovation)) / variance;
 }
 
 bool memory_says_moving(const TrackState &state, const ClassifierParams &classifier, const TemporalParams &params)

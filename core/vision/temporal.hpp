@@ -13,8 +13,10 @@
 // position give heavy-tailed jumps, and a gate built on the measured typical residual let hundreds of
 // static points through on the sim (docs/classification.md has the numbers).
 // A point stops being followed (and starts afresh) when its match is not trusted: the texture at both ends
-// differs, or r jumps away from the track's mean own motion by more than the per-frame gate, which is what a
-// mismatch onto a look-alike (a repeated window, say) does.
+// differs, or r jumps away from the track's mean own motion R / S, which is what a mismatch onto a look-alike
+// (a repeated window, say) does. The jump test is its own chi-square test on that 2-d innovation: r carries
+// the position noise of both its ends (2 sigma^2 per axis) and R / S that of its frames (2 sigma^2 W / S^2),
+// so |r - R/S|^2 / (2 sigma^2 (1 + W / S^2)) > jump_chi2 (2 dof) breaks the track.
 #include <cstdint>
 #include <limits>
 #include <optional>
@@ -32,9 +34,10 @@
 namespace stereod::vision {
 
 struct TemporalParams {
-	double window_s = 0.5; ///< time constant of the memory; 0 turns it off (the seed's per-pair labels only)
-	double chi2 = 9.21;    ///< gate on the remembered own motion (chi-square, 2 dof, 99%)
-	int min_age = 3;       ///< frames a point must have been followed before its memory may label it
+	double window_s = 0.5;	 ///< time constant of the memory; 0 turns it off (the seed's per-pair labels only)
+	double chi2 = 9.21;	 ///< gate on the remembered own motion (chi-square, 2 dof, 99%)
+	double jump_chi2 = 9.21; ///< a frame's own motion this far from the track's mean breaks it (2 dof, 99%)
+	int min_age = 3;	 ///< frames a point must have been followed before its memory may label it
 };
 
 struct TrackState {
@@ -94,6 +97,10 @@ TrackSet follow_tracks(const TrackSet *prev, const FollowInput &input, const Cla
 /// about one interval later (frames were lost or the source paused): then there is no basis to predict.
 std::optional<std::vector<cv::Point2f>>
 predict_positions(const TrackSet &tracks, const std::vector<cv::KeyPoint> &keypoints, int64_t next_t_ns);
+
+/// The jump test's statistic: how far a frame's own motion `own` lies from the track's mean, over its
+/// variance (chi-square, 2 dof, for a track whose point keeps its motion).
+double jump_statistic(const TrackState &before, cv::Point2f own, const ClassifierParams &classifier);
 
 /// True when a followed point's remembered own motion clears the gate.
 bool memory_says_moving(const TrackState &state, const ClassifierParams &classifier, const TemporalParams &params);

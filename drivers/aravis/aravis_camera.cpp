@@ -239,11 +239,19 @@ void AravisCamera::configure(const AravisConfig &config)
 	const int buffers = std::max(2, config.buffers);
 	for (int i = 0; i < buffers; ++i)
 		arv_stream_push_buffer(stream_, arv_buffer_new(payload, nullptr));
+	buffers_ = buffers;
+}
+
+void AravisCamera::start()
+{
+	if (acquiring_)
+		return;
+	Error error;
 	arv_camera_start_acquisition(camera_, &error);
-	error.check(where + ": starting acquisition");
+	error.check("aravis: " + role_ + " camera " + id_ + ": starting acquisition");
 	acquiring_ = true;
 	spdlog::info("aravis: {} {}: {}x{} {} at {} fps, payload {} bytes, {} buffers", role_, description_, width_,
-		     height_, pixel_format_name_, arv_camera_get_frame_rate(camera_, nullptr), payload, buffers);
+		     height_, pixel_format_name_, arv_camera_get_frame_rate(camera_, nullptr), payload_, buffers_);
 }
 
 bool AravisCamera::next(uint64_t timeout_us, BufferView &view)

@@ -42,8 +42,8 @@ struct StreamStatistics {
 class AravisCamera
 {
 public:
-	/// Opens and configures `id` and starts streaming. Throws SourceError naming the camera, the feature,
-	/// the value and what the camera allows, or (camera not found) the cameras that were found.
+	/// Opens and configures `id` and creates its stream, ready for start(). Throws SourceError naming the
+	/// camera, the feature, the value and what the camera allows, or (camera not found) the cameras found.
 	AravisCamera(const std::string &id, const AravisConfig &config, const std::string &role);
 	~AravisCamera();
 	AravisCamera(const AravisCamera &) = delete;
@@ -55,6 +55,13 @@ public:
 	bool next(uint64_t timeout_us, BufferView &view);
 	void give_back(BufferView &view);
 
+	/// Starts acquisition. Kept apart from the constructor so that a source opens every stream before any
+	/// camera sends: with a packet socket (CAP_NET_RAW), Aravis attaches the socket's port filter only after
+	/// creating it, and a stream created while another camera on the host already sends can take some of
+	/// that camera's packets into its first frame (seen on two fake cameras: packets 6-9 of the left image
+	/// inside a right frame marked complete).
+	void start();
+
 	void software_trigger();
 	/// Gives back every buffer already waiting (frames that arrived while the other camera was away).
 	void drain();
@@ -62,6 +69,7 @@ public:
 	[[nodiscard]] bool control_lost() const noexcept { return control_lost_.load(); }
 	[[nodiscard]] StreamStatistics statistics() const;
 	[[nodiscard]] uint64_t failed() const noexcept { return failed_; }
+	[[nodiscard]] bool acquiring() const noexcept { return acquiring_; }
 	[[nodiscard]] int width() const noexcept { return width_; }
 	[[nodiscard]] int height() const noexcept { return height_; }
 	[[nodiscard]] uint32_t pixel_format() const noexcept { return pixel_format_; }
@@ -84,6 +92,7 @@ private:
 	int height_ = 0;
 	uint32_t pixel_format_ = 0;
 	size_t payload_ = 0; ///< bytes of every stream buffer
+	int buffers_ = 0;
 	std::string pixel_format_name_;
 	std::string description_;
 	bool gige_ = false;

@@ -27,6 +27,9 @@ using aravis::BufferView;
 using aravis::StreamStatistics;
 
 constexpr size_t kLeft = 0, kRight = 1;
+/// Frames of a camera reopened while its partner streams that are discarded (AravisCamera::start): stray
+/// packets sit in the new socket before the camera's own, so they can only reach its first frame or two.
+constexpr int kSettlingFrames = 2;
 
 /// The camera's pixel format decides bytes per pixel and, for Bayer formats, the mosaic.
 PixelRecipe recipe_for(const AravisConfig &config, uint32_t format, const std::string &format_name)
@@ -87,6 +90,7 @@ struct CameraState {
 	BufferView pending;	  ///< popped and not yet paired
 	int64_t pending_host = 0; ///< its timestamp on the host clock
 	bool has_pending = false;
+	int settling = 0;	   ///< first frames after a lone reopen still to discard (AravisCamera::start)
 	int64_t last_frame_ns = 0; ///< host time of the last buffer of any kind
 	camera::CadenceTracker cadence{0, 0};
 	std::atomic<uint64_t> skipped_periods{0}, irregular{0}; ///< the cadence's counts, for status
@@ -130,6 +134,10 @@ public:
 		open(kLeft);
 		if (paired_)
 			open(kRight);
+		// Every stream exists before any camera sends (AravisCamera::start says why).
+		cams_[kLeft].camera->start();
+		if (paired_)
+			cams_[kRight].camera->start();
 		const AravisCamera &left = *cams_[kLeft].camera;
 		recipe_ = recipe_for(config_, left.pixel_format(), left.pixel_format_name());
 		if (paired_) {
@@ -210,6 +218,8 @@ public:
 	{
 		if (outage_start_ns_ == 0)
 			outage_start_ns_ = monotonic_ns();
+		bool partner_streaming = false;
+		std::array<bool, 2> to_start{};
 		for (size_t side : {kLeft, kRight}) {
 			if (side == kRight && !paired_)
 				continue;
@@ -217,12 +227,14 @@ public:
 			if (state.camera && !failed(state)) {
 				release_pending(state); // its partner is gone: what it holds and queued is stale
 				state.camera->drain();
+				(state.camera->acquiring() ? partner_streaming : to_start[side]) = true;
 				continue;
 			}
 			release_pending(state);
 			retire(state);
 			try {
 				open(side);
+				to_start[side] = true;
 			} catch (const SourceError &e) {
 				spdlog::debug("aravis: reconnect {}: {}", side == kLeft ? "left" : "right", e.what());
 				return false;
@@ -236,6 +248,20 @@ public:
 				retire(state);
 				return false;
 			}
+		}
+		// Started only now, every stream existing (AravisCamera::start). A camera reopened while its partner
+		// kept sending can still have taken a few of the partner's packets into its first frames: those
+		// frames are discarded and counted (device.settling_discarded).
+		for (size_t side : {kLeft, kRight}) {
+			if (!to_start[side])
+				continue;
+			try {
+				cams_[side].camera->start();
+			} catch (const SourceError &e) {
+				spdlog::debug("aravis: reconnect {}: {}", side == kLeft ? "left" : "right", e.what());
+				return false;
+			}
+			cams_[side].settling = partner_streaming ? kSettlingFrames : 0;
 		}
 		// The frames the outage cost: its length at the nominal rate (the cameras' own counters restarted).
 		const double outage_s = static_cast<double>(monotonic_ns() - outage_start_ns_) * 1e-9;
@@ -277,6 +303,7 @@ public:
 		out.drops["unpaired"] = unpaired_.load();
 		out.drops["outage"] = outage_frames_.load();
 		out.device["startup_unpaired"] = static_cast<int64_t>(startup_unpaired_.load());
+		out.device["settling_discarded"] = static_cast<int64_t>(settling_discarded_.load());
 		out.device["skew_last_ns"] = skew_last_.load();
 		out.device["skew_max_abs_ns"] = skew_max_abs_.load();
 		return out;
@@ -354,6 +381,12 @@ private:
 	{
 		if (!state.camera->next(timeout_us, state.pending))
 			return false;
+		if (state.settling > 0) {
+			--state.settling;
+			settling_discarded_.fetch_add(1);
+			state.camera->give_back(state.pending);
+			return false;
+		}
 		BufferView &view = state.pending;
 		state.last_frame_ns = view.arrival_ns;
 		state.has_pending = true;
@@ -452,7 +485,7 @@ private:
 	uint64_t left_missing_seen_ = 0;
 	int64_t outage_start_ns_ = 0;
 	bool paired_once_ = false;
-	std::atomic<uint64_t> unpaired_{0}, startup_unpaired_{0}, outage_frames_{0};
+	std::atomic<uint64_t> unpaired_{0}, startup_unpaired_{0}, outage_frames_{0}, settling_discarded_{0};
 	std::atomic<int64_t> skew_last_{0}, skew_max_abs_{0};
 };
 

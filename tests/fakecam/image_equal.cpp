@@ -25,7 +25,21 @@ int main(int argc, char **argv)
 	cv::compare(a.reshape(1), b.reshape(1), diff, cv::CMP_NE);
 	const int differing = cv::countNonZero(diff);
 	if (differing > 0) {
-		std::printf("differ: %d of %d samples\n", differing, static_cast<int>(diff.total()));
+		// Where: the rows spanned, and how many of A's differing samples are zero (a hole left by lost data
+		// looks different from a shifted or foreign picture).
+		int first_row = -1, last_row = -1, zeros = 0;
+		const cv::Mat flat_a = a.reshape(1);
+		for (int y = 0; y < diff.rows; ++y) {
+			if (cv::countNonZero(diff.row(y)) == 0)
+				continue;
+			if (first_row < 0)
+				first_row = y;
+			last_row = y;
+			for (int x = 0; x < diff.cols; ++x)
+				zeros += diff.at<uchar>(y, x) != 0 && flat_a.at<uchar>(y, x) == 0 ? 1 : 0;
+		}
+		std::printf("differ: %d of %d samples, rows %d-%d, %d of them zero in %s\n", differing,
+			    static_cast<int>(diff.total()), first_row, last_row, zeros, argv[1]);
 		return 1;
 	}
 	return 0;

@@ -22,3 +22,14 @@ echo "$labels" | jq -e '.depth.median_relative_error < 0.01' >/dev/null ||
 echo "$trajectory" | jq -e '.drift_translation_percent < 1.0 and .drift_windows > 100' >/dev/null ||
 	fail "drift over 10-frame windows not under 1 %: $trajectory"
 pass "walk, 120 frames: pose on $valid/119; depth $(echo "$labels" | jq -c .depth); trajectory $(echo "$trajectory" | jq -c '{ate_rmse_m: .ate_m.rmse, rpe_median_m: .rpe_translation_m.median, drift_percent: .drift_translation_percent}'); labels F1 $(echo "$labels" | jq .all.f1)"
+
+# The static map of the walk: written, as many vertices as announced, all finite, and the colour path runs.
+"$STEREOCTL" map --results "$WORK/walk.ndjson" -o "$WORK/walk.ply" --colour --input sim --format sim \
+	--set sim.scene=walk --set sim.depth=true --set sim.frames=120 2>"$WORK/map.log" || fail "map: $(cat "$WORK/map.log")"
+announced=$(grep -m1 '^element vertex' "$WORK/walk.ply" | awk '{print $3}')
+written=$(sed '1,/^end_header/d' "$WORK/walk.ply" | awk 'NF == 7 && $1 == $1 + 0 && $3 > 0' | wc -l)
+[ "$announced" -ge 1000 ] || fail "static map of only $announced points: $(cat "$WORK/map.log")"
+[ "$written" -eq "$announced" ] || fail "static map: $announced vertices announced, $written finite ones written"
+pass "static map: $(cat "$WORK/map.log")"
+"$STEREOCTL" eval --groups --results "$WORK/walk.ndjson" --truth "$WORK/truth" --name walk | tail -1 |
+	sed 's/^/groups (figures, not asserted): /'

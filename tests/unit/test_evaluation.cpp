@@ -150,3 +150,68 @@ TEST(Trajectory, TumAndKittiFilesRoundTripAndNameTheBadLine)
 	}
 	std::filesystem::remove_all(dir);
 }
+
+// ------------------------------------------------------------------------------------------- groups
+#include "tools/group_eval.hpp"
+
+namespace {
+
+TargetGroup group_at(int id, cv::Rect box, double speed, double heading, std::array<double, 3> position)
+{
+	TargetGroup g;
+	g.id = id;
+	g.box_px = {static_cast<float>(box.x), static_cast<float>(box.y), static_cast<float>(box.br().x - 1),
+		    static_cast<float>(box.br().y - 1)};
+	g.point_count = 20;
+	g.speed_mps = speed;
+	g.heading_rad = heading;
+	g.position_m = position;
+	return g;
+}
+
+} // namespace
+
+TEST(GroupEvaluation, HandComputedFrames)
+{
+	// Two movers apart: mover 1 at x 100-139, mover 2 at x 300-339. Truth: the camera is the world
+	// (identity pose); mover 1 walks +x at 1.5 m/s (heading 90 deg), mover 2 walks +z at 1 m/s (heading 0).
+	cv::Mat mask(240, 480, CV_8UC1, cv::Scalar(0));
+	mask(cv::Rect(100, 50, 40, 100)).setTo(1);
+	mask(cv::Rect(300, 60, 40, 100)).setTo(2);
+	const std::string truth = R"({"seq":1,"camera_pose":[1,0,0,0, 0,1,0,0, 0,0,1,0],"objects":[)"
+				  R"({"id":1,"position_m":[-1,0,5],"velocity_mps":[1.5,0,0]},)"
+				  R"({"id":2,"position_m":[1,0,6],"velocity_mps":[0,0,1]},)"
+				  R"({"id":3,"position_m":[9,0,9],"velocity_mps":[0,0,1]}]})"; // id 3 is not in view
+	const auto movers = tools::visible_movers(mask, truth, 400);
+	ASSERT_EQ(movers.size(), 2U);
+	EXPECT_EQ(movers[0].box, cv::Rect(100, 50, 40, 100));
+	EXPECT_TRUE(tools::movers_separated(movers, 8));
+
+	tools::GroupScore score;
+	FrameResult frame;
+	// Frame 1: one group on mover 1, 10% fast, heading 10 deg off, centroid 0.3 m off; one on the background.
+	frame.groups = {group_at(7, {98, 48, 44, 104}, 1.65, (90 + 10) * CV_PI / 180, {-1, 0, 5.3}),
+			group_at(8, {400, 10, 30, 30}, 1.0, 0.0, {3, 0, 8})};
+	score.add(frame, mask, movers);
+	// Frame 2: both movers covered, mover 1 under another id (a switch), speeds exact.
+	frame.groups = {group_at(9, {100, 50, 40, 100}, 1.5, CV_PI / 2, {-1, 0, 5}),
+			group_at(10, {300, 60, 40, 100}, 1.0, 0.0, {1, 0, 6})};
+	score.add(frame, mask, movers);
+
+	EXPECT_EQ(score.frames, 2U);
+	EXPECT_EQ(score.frames_separated, 2U);
+	// Frame 1 has 2 groups for 2 movers, one of them on the background: the count alone does not see that,
+	// the `on a mover` share does.
+	EXPECT_EQ(score.count_exact, 2U);
+	EXPECT_EQ(score.groups, 4U);
+	EXPECT_EQ(score.groups_on_movers, 3U);
+	EXPECT_EQ(score.mover_views, 4U);
+	EXPECT_EQ(score.movers_covered, 3U);
+	EXPECT_EQ(score.id_switches, 1U);
+	ASSERT_EQ(score.speed_relative_error.size(), 3U);
+	EXPECT_NEAR(score.speed_relative_error[0], 0.1, 1e-6);
+	ASSERT_EQ(score.heading_error_deg.size(), 3U);
+	EXPECT_NEAR(score.heading_error_deg[0], 10.0, 1e-4);
+	EXPECT_NEAR(score.centroid_error_m[0], 0.3, 1e-6);
+	EXPECT_NEAR(tools::fraction_below(score.heading_error_deg, 15), 1.0, 1e-12);
+}

@@ -45,6 +45,7 @@ TEST(Protocol, FrameMessageRoundTrips)
 	r.ego = EgoMotion{};
 	r.ego->homography = std::array<double, 9>{1, 0, 2, 0, 1, 3, 0, 0, 1};
 	r.ego->inliers = 99;
+	r.ego->homography_refined = false;
 	const FrameResult back = protocol::parse_frame_message(nlohmann::json::parse(protocol::frame_message(r)));
 	EXPECT_EQ(back.seq, 7U);
 	EXPECT_EQ(back.source, "video");
@@ -56,6 +57,7 @@ TEST(Protocol, FrameMessageRoundTrips)
 	EXPECT_EQ(back.ego->inliers, 99);
 	ASSERT_TRUE(back.ego->homography.has_value());
 	EXPECT_DOUBLE_EQ((*back.ego->homography)[2], 2.0);
+	EXPECT_FALSE(back.ego->homography_refined) << "a failed second fit is said, not hidden";
 	EXPECT_FALSE(back.ego->valid.has_value()); // monocular: no pose fields at all
 }
 

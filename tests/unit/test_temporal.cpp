@@ -1,6 +1,8 @@
 // The motion memory (core/vision/temporal.hpp) on constructed tracks with known answers.
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <cstdio>
 #include <random>
 
 #include <opencv2/imgproc.hpp>
@@ -174,4 +176,53 @@ TEST(MotionMemory, KnownMoversDoNotVoteForTheHomography)
 	const float told_shift = project(*told.homography, centre).x - centre.x;
 	EXPECT_GT(std::abs(blind_shift - 2.0F), 0.2F) << "the mover drags the fit";
 	EXPECT_LT(std::abs(told_shift - 2.0F), 0.1F);
+}
+
+TEST(MotionMemory, JumpStatisticIsTheInnovationOverItsVariance)
+{
+	ClassifierParams classifier;
+	classifier.reprojection_sigma_px = 1.0;
+	// A track of one frame: mean = that frame's own motion, whose noise equals the new frame's: the
+	// innovation's variance per axis is 2 sigma^2 + 2 sigma^2 = 4.
+	TrackState fresh;
+	fresh.motion = {1, 0};
+	fresh.count = 1;
+	fresh.noise_weight = 1;
+	EXPECT_NEAR(jump_statistic(fresh, {5, 0}, classifier), 16.0 / 4.0, 1e-6);
+	// A long track: W / S^2 small, the variance tends to the new frame's own 2 sigma^2.
+	TrackState old;
+	old.motion = {20, 0};
+	old.count = 20;
+	old.noise_weight = 4; // W / S^2 = 0.01
+	EXPECT_NEAR(jump_statistic(old, {1, 3}, classifier), 9.0 / (2.0 * 1.01), 1e-6);
+}
+
+TEST(MotionMemory, FramesASteadyMoverNeedsToBeRemembered)
+{
+	// The figure docs/classification.md quotes: frames until a steady mover at m px per frame (30 fps,
+	// window 0.5 s, sigma 1) is remembered as moving, by the memory itself and by the closed form
+	// |R_k|^2 / W_k = m^2 (1 - l^k)^2 / (1 - l)^2 * (1 - l^2) / (1 - l^(2k)) > chi2.
+	for (const float m : {0.6F, 0.8F, 1.0F, 2.0F}) {
+		Follower f;
+		std::vector<cv::Point2f> prev = {{100, 300}};
+		f.step(prev, prev);
+		int first = -1;
+		for (int frame = 1; frame <= 120 && first < 0; ++frame) {
+			const std::vector<cv::Point2f> cur = {{100 + m * static_cast<float>(frame), 300}};
+			f.step(prev, cur);
+			prev = cur;
+			if (f.moving(0))
+				first = frame;
+		}
+		const double l = std::exp(-1.0 / 30.0 / f.params.window_s);
+		int expected = -1;
+		for (int k = 1; k <= 120 && expected < 0; ++k) {
+			const double r = m * (1 - std::pow(l, k)) / (1 - l);
+			const double w = (1 - std::pow(l, 2 * k)) / (1 - l * l);
+			if (k >= f.params.min_age && r * r / w > f.params.chi2)
+				expected = k;
+		}
+		EXPECT_EQ(first, expected) << "m = " << m;
+		std::printf("steady mover at %.1f px/frame: remembered as moving after %d frames\n", m, first);
+	}
 }

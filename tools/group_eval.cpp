@@ -1,0 +1,179 @@
+#include "tools/group_eval.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <iomanip>
+#include <numbers>
+#include <sstream>
+
+#include <nlohmann/json.hpp>
+
+namespace stereod::tools {
+
+std::vector<TrueMover> visible_movers(const cv::Mat &mask, const std::string &truth_line, int min_pixels)
+{
+	std::vector<TrueMover> movers;
+	if (mask.empty())
+		return movers;
+	std::map<int, std::pair<int, cv::Rect>> seen; // id -> pixels, box
+	for (int y = 0; y < mask.rows; ++y) {
+		const auto *row = mask.ptr<uint8_t>(y);
+		for (int x = 0; x < mask.cols; ++x) {
+			if (row[x] == 0)
+				continue;
+			auto &[pixels, box] = seen[row[x]];
+			box = pixels == 0 ? cv::Rect(x, y, 1, 1) : box | cv::Rect(x, y, 1, 1);
+			++pixels;
+		}
+	}
+	const nlohmann::json truth = nlohmann::json::parse(truth_line);
+	cv::Matx33d r_wc = cv::Matx33d::eye();
+	if (truth.contains("camera_pose"))
+		for (int r = 0; r < 3; ++r)
+			for (int c = 0; c < 3; ++c)
+				r_wc(r, c) = truth["camera_pose"][static_cast<size_t>(r * 4 + c)].get<double>();
+	for (const auto &object : truth.value("objects", nlohmann::json::array())) {
+		const int id = object.at("id").get<int>();
+		const auto it = seen.find(id);
+		if (it == seen.end() || it->second.first < min_pixels)
+			continue;
+		TrueMover m;
+		m.id = id;
+		m.pixels = it->second.first;
+		m.box = it->second.second;
+		const auto p = object.at("position_m").get<std::array<double, 3>>();
+		const auto v = object.at("velocity_mps").get<std::array<double, 3>>();
+		m.position_m = {p[0], p[1], p[2]};
+		m.world_velocity_mps = r_wc * cv::Vec3d(v[0], v[1], v[2]);
+		movers.push_back(m);
+	}
+	return movers;
+}
+
+std::vector<int> match_groups(const std::vector<TargetGroup> &groups, const cv::Mat &mask, double min_share)
+{
+	std::vector<int> matched;
+	for (const auto &g : groups) {
+		const cv::Rect box = cv::Rect(cv::Point(static_cast<int>(std::floor(g.box_px[0])),
+							static_cast<int>(std::floor(g.box_px[1]))),
+					      cv::Point(static_cast<int>(std::ceil(g.box_px[2])) + 1,
+							static_cast<int>(std::ceil(g.box_px[3])) + 1)) &
+				     cv::Rect(0, 0, mask.cols, mask.rows);
+		std::map<int, int> count;
+		for (int y = box.y; y < box.y + box.height; ++y) {
+			const auto *row = mask.ptr<uint8_t>(y);
+			for (int x = box.x; x < box.x + box.width; ++x)
+				if (row[x] != 0)
+					++count[row[x]];
+		}
+		int best = 0, best_count = 0;
+		for (const auto &[id, n] : count)
+			if (n > best_count) {
+				best = id;
+				best_count = n;
+			}
+		const double area = std::max(1.0, static_cast<double>(box.area()));
+		matched.push_back(static_cast<double>(best_count) / area >= min_share ? best : 0);
+	}
+	return matched;
+}
+
+bool movers_separated(const std::vector<TrueMover> &movers, int margin_px)
+{
+	for (size_t i = 0; i < movers.size(); ++i)
+		for (size_t j = i + 1; j < movers.size(); ++j) {
+			const cv::Rect grown(movers[i].box.x - margin_px, movers[i].box.y - margin_px,
+					     movers[i].box.width + 2 * margin_px, movers[i].box.height + 2 * margin_px);
+			if ((grown & movers[j].box).area() > 0)
+				return false;
+		}
+	return true;
+}
+
+void GroupScore::add(const FrameResult &result, const cv::Mat &mask, const std::vector<TrueMover> &movers)
+{
+	++frames;
+	const auto &gs = result.groups;
+	groups += gs.size();
+	if (movers.empty()) {
+		++frames_without_movers;
+		groups_without_movers += gs.size();
+	} else if (movers_separated(movers, separation_margin_px)) {
+		++frames_separated;
+		count_exact += gs.size() == movers.size() ? 1 : 0;
+	}
+	const std::vector<int> on = match_groups(gs, mask);
+	for (const auto &mover : movers) {
+		++mover_views;
+		// The group covering this mover; of several, the one with the most points.
+		const TargetGroup *best = nullptr;
+		for (size_t i = 0; i < gs.size(); ++i)
+			if (on[i] == mover.id && (best == nullptr || gs[i].point_count > best->point_count))
+				best = &gs[i];
+		if (best == nullptr)
+			continue;
+		++movers_covered;
+		if (const auto it = last_group_of_mover.find(mover.id);
+		    it != last_group_of_mover.end() && it->second != best->id)
+			++id_switches;
+		last_group_of_mover[mover.id] = best->id;
+		if (best->position_m) {
+			const auto &p = *best->position_m;
+			centroid_error_m.push_back(cv::norm(cv::Vec3d(p[0], p[1], p[2]) - mover.position_m));
+		}
+		const double true_speed = cv::norm(mover.world_velocity_mps);
+		if (best->speed_mps && true_speed > 1e-6)
+			speed_relative_error.push_back(std::abs(*best->speed_mps - true_speed) / true_speed);
+		const cv::Vec3d &v = mover.world_velocity_mps;
+		const double ground_speed = std::hypot(v[0], v[2]);
+		if (best->heading_rad && ground_speed >= min_heading_speed_mps &&
+		    cv::norm(mover.position_m) <= max_heading_distance_m) {
+			double d = *best->heading_rad - std::atan2(v[0], v[2]);
+			d = std::remainder(d, 2 * std::numbers::pi);
+			heading_error_deg.push_back(std::abs(d) * 180 / std::numbers::pi);
+		}
+	}
+	for (size_t i = 0; i < gs.size(); ++i)
+		groups_on_movers += on[i] != 0 ? 1 : 0;
+}
+
+double median(std::vector<double> values)
+{
+	if (values.empty())
+		return std::nan("");
+	const auto mid = values.begin() + static_cast<std::ptrdiff_t>(values.size() / 2);
+	std::nth_element(values.begin(), mid, values.end());
+	return *mid;
+}
+
+double fraction_below(const std::vector<double> &values, double limit)
+{
+	if (values.empty())
+		return std::nan("");
+	return static_cast<double>(std::count_if(values.begin(), values.end(), [&](double v) { return v < limit; })) /
+	       static_cast<double>(values.size());
+}
+
+std::string group_score_table(const std::string &name, const GroupScore &s)
+{
+	std::ostringstream out;
+	const auto ratio = [](uint64_t a, uint64_t b) {
+		return b > 0 ? static_cast<double>(a) / static_cast<double>(b) : std::nan("");
+	};
+	out << std::fixed << std::setprecision(3);
+	out << "| scene | frames | separated frames | count exact | groups | on a mover | groups with no mover in view "
+	       "| "
+	       "mover views covered | centroid error m (median) | speed error (median) | speed within 10% | heading "
+	       "error deg (median) | heading within 15 deg | id switches |\n";
+	out << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+	out << "| " << name << " | " << s.frames << " | " << s.frames_separated << " | "
+	    << ratio(s.count_exact, s.frames_separated) << " | " << s.groups << " | "
+	    << ratio(s.groups_on_movers, s.groups) << " | " << s.groups_without_movers << " | "
+	    << ratio(s.movers_covered, s.mover_views) << " | " << median(s.centroid_error_m) << " | "
+	    << median(s.speed_relative_error) << " | " << fraction_below(s.speed_relative_error, 0.10) << " | "
+	    << std::setprecision(1) << median(s.heading_error_deg) << " | " << std::setprecision(3)
+	    << fraction_below(s.heading_error_deg, 15.0) << " | " << s.id_switches << " |\n";
+	return out.str();
+}
+
+} // namespace stereod::tools

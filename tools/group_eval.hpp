@@ -1,0 +1,65 @@
+#pragma once
+// Scoring moving-target groups (core/vision/groups.hpp) against a synthetic source's truth: how many groups
+// against how many movers are in view, which mover each group covers, and how far its position, speed and
+// heading are from that mover's; and how often a mover's group id changes. Pure: results and truth in,
+// numbers out (issue 16's evaluation; `stereoctl eval --groups`).
+#include <cstdint>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "core/result.hpp"
+
+namespace stereod::tools {
+
+/// A mover in view in one frame, from the truth: mask pixels, their box, and its state.
+struct TrueMover {
+	int id = 0;
+	int pixels = 0;
+	cv::Rect box;
+	cv::Vec3d position_m;	      ///< body centre, left camera frame
+	cv::Vec3d world_velocity_mps; ///< in the world frame (the first camera's), as groups report it
+};
+
+/// One truth.ndjson line's objects that show at least `min_pixels` pixels in `mask` (ids as in the mask).
+/// `truth_line` is the line's JSON text.
+std::vector<TrueMover> visible_movers(const cv::Mat &mask, const std::string &truth_line, int min_pixels);
+
+/// For each group, the mover it covers: the mover id holding the most mask pixels inside the group's box,
+/// when that is at least `min_share` of the box; 0 when the box lies mostly on the static scene.
+std::vector<int> match_groups(const std::vector<TargetGroup> &groups, const cv::Mat &mask, double min_share = 0.2);
+
+/// True when no two movers' boxes come within `margin_px` of each other: one group each is the right count.
+bool movers_separated(const std::vector<TrueMover> &movers, int margin_px);
+
+struct GroupScore {
+	uint64_t frames = 0;	       ///< frames scored (with a mask)
+	uint64_t frames_separated = 0; ///< with at least one mover in view, all apart
+	uint64_t count_exact = 0;      ///< of those, as many groups as movers
+	uint64_t frames_without_movers = 0;
+	uint64_t groups_without_movers = 0; ///< groups in frames where no mover is in view
+	uint64_t groups = 0;
+	uint64_t groups_on_movers = 0;
+	uint64_t mover_views = 0;    ///< (frame, mover in view) pairs
+	uint64_t movers_covered = 0; ///< of those, with a group on the mover
+	std::vector<double> centroid_error_m;
+	std::vector<double> speed_relative_error;
+	std::vector<double> heading_error_deg; ///< movers within max_heading_distance_m, moving
+	uint64_t id_switches = 0;
+	std::map<int, int> last_group_of_mover; ///< mover id -> group id last seen on it
+
+	/// Scores one frame and carries the id memory on. Frames must come in order.
+	void add(const FrameResult &result, const cv::Mat &mask, const std::vector<TrueMover> &movers);
+	double max_heading_distance_m = 15.0;
+	double min_heading_speed_mps = 0.3;
+	int separation_margin_px = 8;
+};
+
+double median(std::vector<double> values);
+double fraction_below(const std::vector<double> &values, double limit);
+std::string group_score_table(const std::string &name, const GroupScore &score);
+
+} // namespace stereod::tools
