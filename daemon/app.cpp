@@ -1,8 +1,12 @@
 #include "daemon/app.hpp"
 
+#include <algorithm>
+#include <chrono>
 #include <csignal>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <iostream>
 #include <thread>
 #include <unistd.h>
@@ -19,6 +23,7 @@
 #include "core/protocol.hpp"
 #include "daemon/pipeline.hpp"
 #include "daemon/socket_server.hpp"
+#include "daemon/watchdog.hpp"
 #include "drivers/calibration_file.hpp"
 
 namespace stereod::daemon {
@@ -47,6 +52,22 @@ int wait_signal(const sigset_t &set, double seconds)
 			 static_cast<long>((seconds - static_cast<double>(static_cast<time_t>(seconds))) * 1e9)};
 	const int sig = sigtimedwait(&set, nullptr, &timeout);
 	return sig > 0 ? sig : 0;
+}
+
+/// A fault for the service tests only (docs/testing.md): STEREOD_TEST_FAULT=hang_publish_after=N makes the
+/// publisher block for good after N frames, as a hung stage would, so a test can watch systemd's watchdog act.
+/// 0: no fault.
+uint64_t hang_publish_after()
+{
+	const char *fault = std::getenv("STEREOD_TEST_FAULT");
+	if (fault == nullptr || *fault == '\0')
+		return 0;
+	const std::string text(fault), key = "hang_publish_after=";
+	char *end = nullptr;
+	const unsigned long long n = text.rfind(key, 0) == 0 ? std::strtoull(text.c_str() + key.size(), &end, 10) : 0;
+	if (n == 0 || end == nullptr || *end != '\0')
+		throw ConfigError("STEREOD_TEST_FAULT=" + text + ": not a known fault (hang_publish_after=N, N > 0)");
+	return n;
 }
 
 OverflowPolicy policy_for(const std::string &overflow, bool live)
@@ -205,36 +226,82 @@ std::string driver_for_format(const std::string &format, const std::string &path
 	return "video";
 }
 
-int run_daemon(const DaemonConfig &config)
+namespace {
+
+SocketServerOptions server_options(const OutputConfig &output)
 {
+	return {output.socket,
+		output.socket_mode,
+		static_cast<size_t>(output.client_queue),
+		static_cast<size_t>(output.client_max_input),
+		static_cast<size_t>(output.max_clients),
+		static_cast<size_t>(output.client_queue_bytes)};
+}
+
+/// The options a reload applies while everything keeps running; any other change rebuilds the source and the
+/// pipeline in place (clients stay connected), except the socket's path, which needs a restart.
+bool applies_live(const std::string &option)
+{
+	return option == "log.level" || option == "output.status_interval_s" || option == "output.socket_mode" ||
+	       option == "output.client_queue" || option == "output.client_queue_bytes" ||
+	       option == "output.max_clients" || option == "output.client_max_input";
+}
+
+} // namespace
+
+int run_daemon(const DaemonConfig &initial, const std::function<DaemonConfig()> &reload)
+{
+	DaemonConfig config = initial;
 	set_log_level(config.log.level);
 	const sigset_t signals = block_signals();
 	const auto registry = drivers::SourceRegistry::with_builtin_drivers();
-	auto source = registry.create(config.source);
-	const drivers::SourceInfo info = source->info();
-	spdlog::info("source: {} ({}x{} {}, {}{} fps {})", info.description, info.geometry.width, info.geometry.height,
-		     to_string(info.geometry.format), info.geometry.stereo ? "stereo, " : "",
-		     info.geometry.depth ? "depth, " : "", info.geometry.nominal_fps);
+	SocketServer server(server_options(config.output));
+	const uint64_t hang_after = hang_publish_after();
+	uint64_t sunk = 0; // publisher thread only
 
-	SocketServer server(
-		{config.output.socket, config.output.socket_mode, static_cast<size_t>(config.output.client_queue),
-		 static_cast<size_t>(config.output.client_max_input), static_cast<size_t>(config.output.max_clients),
-		 static_cast<size_t>(config.output.client_queue_bytes)});
-	server.set_greeting(
-		protocol::hello_message(monotonic_ns(), info.name, info.geometry.width, info.geometry.height));
-	const PipelineOptions options = pipeline_options(config, info, info.live);
-	Pipeline pipeline(std::move(source), options,
-			  [&server](FrameResult &result) { server.publish(protocol::frame_message(result)); });
-	pipeline.start();
-	spdlog::info("streaming on {} ({} workers, ring {} {})", config.output.socket, options.workers,
-		     options.ring_capacity, to_string(options.overflow));
-	sd_notifyf(0, "READY=1\nSTATUS=streaming %s on %s", info.name.c_str(), config.output.socket.c_str());
+	// The source and the pipeline: built at start, and again in place when a reload changes what they use.
+	PipelineOptions options;
+	auto build_pipeline = [&](const DaemonConfig &c) {
+		auto source = registry.create(c.source);
+		const drivers::SourceInfo info = source->info();
+		spdlog::info("source: {} ({}x{} {}, {}{} fps {})", info.description, info.geometry.width,
+			     info.geometry.height, to_string(info.geometry.format),
+			     info.geometry.stereo ? "stereo, " : "", info.geometry.depth ? "depth, " : "",
+			     info.geometry.nominal_fps);
+		PipelineOptions o = pipeline_options(c, info, info.live);
+		auto built = std::make_unique<Pipeline>(
+			std::move(source), o, [&server, hang_after, &sunk](FrameResult &result) {
+				if (hang_after > 0 && ++sunk > hang_after) {
+					spdlog::warn("STEREOD_TEST_FAULT: the publisher hangs from frame {} on",
+						     result.seq);
+					for (;;)
+						std::this_thread::sleep_for(std::chrono::hours(1));
+				}
+				server.publish(protocol::frame_message(result));
+			});
+		server.set_greeting(
+			protocol::hello_message(monotonic_ns(), info.name, info.geometry.width, info.geometry.height));
+		built->start();
+		spdlog::info("streaming on {} ({} workers, ring {} {})", c.output.socket, o.workers, o.ring_capacity,
+			     to_string(o.overflow));
+		options = o;
+		return built;
+	};
+	std::unique_ptr<Pipeline> pipeline = build_pipeline(config);
+	// READY=1 waits for the first published frame: "started" means results flow, not that a socket exists.
+	sd_notifyf(0, "STATUS=starting: waiting for the first frame from %s", pipeline->source_info().name.c_str());
+	bool ready = false;
 
 	uint64_t watchdog_usec = 0;
 	const bool watchdog = sd_watchdog_enabled(0, &watchdog_usec) > 0;
-	double tick_s = config.output.status_interval_s;
-	if (watchdog)
-		tick_s = std::min(tick_s, static_cast<double>(watchdog_usec) * 1e-6 / 2);
+	auto tick_for = [&](const DaemonConfig &c) {
+		double tick = c.output.status_interval_s;
+		return watchdog ? std::min(tick, static_cast<double>(watchdog_usec) * 1e-6 / 2) : tick;
+	};
+	double tick_s = tick_for(config);
+	const auto watchdog_limit_ns = static_cast<int64_t>(watchdog_usec) * 1000;
+	WatchdogSample last_sample{0, 0, monotonic_ns()};
+	bool watchdog_withheld = false;
 
 	const int64_t start_ns = monotonic_ns();
 	int64_t next_status_ns = start_ns + static_cast<int64_t>(config.output.status_interval_s * 1e9);
@@ -243,10 +310,16 @@ int run_daemon(const DaemonConfig &config)
 	bool calibration_warned = false;
 	auto emit_status = [&] {
 		const SocketServerStats server_stats = server.stats();
-		const PipelineStats s = pipeline.stats();
+		const PipelineStats s = pipeline->stats();
 		const auto [capture_fps, publish_fps] = meter.update(s.frames_captured, s.frames_published);
-		const auto report = make_status(pipeline, s, server_stats, start_ns, capture_fps, publish_fps);
+		const auto report = make_status(*pipeline, s, server_stats, start_ns, capture_fps, publish_fps);
 		server.publish(protocol::status_message(report));
+		uint64_t frames_dropped = 0;
+		for (const auto &[name, count] : report.drops)
+			frames_dropped += name == "client_queue" ? 0 : count; // that one counts messages, not frames
+		sd_notifyf(0, "STATUS=%s %s: %.1f fps, %llu frames dropped, %zu clients", report.source_state.c_str(),
+			   report.source.c_str(), report.publish_fps, static_cast<unsigned long long>(frames_dropped),
+			   report.clients);
 		// Said once per crossing, not every status: a bumped rig needs recalibrating, not a flood of lines.
 		const bool drifted = report.stereo && report.stereo->drifted;
 		if (drifted != calibration_warned) {
@@ -262,19 +335,102 @@ int run_daemon(const DaemonConfig &config)
 		}
 		return report;
 	};
+
+	// SIGHUP: read the configuration again. A config that fails to load or validate is refused with its
+	// file, line and key, and the running one stays. Live options apply at once; anything the source or
+	// the pipeline uses rebuilds them in place (the old pipeline drains first); clients stay connected.
+	auto reload_config = [&] {
+		const auto now_us = static_cast<unsigned long long>(monotonic_ns() / 1000);
+		sd_notifyf(0, "RELOADING=1\nMONOTONIC_USEC=%llu\nSTATUS=reloading the configuration", now_us);
+		if (!reload) {
+			spdlog::warn("SIGHUP: no configuration file to read again (started without --config); nothing "
+				     "to do");
+		} else {
+			try {
+				DaemonConfig next = reload();
+				if (next.output.socket != config.output.socket) {
+					spdlog::warn("reload: output.socket changes only with a restart; still {}",
+						     config.output.socket);
+					next.output.socket = config.output.socket;
+				}
+				const std::vector<std::string> changed = changed_options(config, next);
+				const bool rebuild = std::any_of(changed.begin(), changed.end(),
+								 [](const std::string &o) { return !applies_live(o); });
+				set_log_level(next.log.level);
+				server.set_limits(server_options(next.output));
+				tick_s = tick_for(next);
+				if (rebuild) {
+					spdlog::info("reload: rebuilding the source and the pipeline");
+					pipeline->request_stop();
+					pipeline->wait();
+					pipeline.reset();
+					try {
+						pipeline = build_pipeline(next);
+					} catch (const std::exception &e) {
+						spdlog::error(
+							"reload: the new source or pipeline failed ({}); back to the "
+							"running configuration",
+							e.what());
+						pipeline = build_pipeline(config);
+						next = config;
+					}
+					meter = RateMeter();
+					last_sample = {0, 0, monotonic_ns()};
+					// Connected clients hear of the new source (its frames' seq start again) as a
+					// new client would.
+					const drivers::SourceInfo &info = pipeline->source_info();
+					server.publish(protocol::hello_message(
+						monotonic_ns(), info.name, info.geometry.width, info.geometry.height));
+				}
+				std::string list;
+				for (const auto &option : changed)
+					list += (list.empty() ? "" : ", ") + option;
+				spdlog::info("reload: {}", changed.empty() ? "nothing changed" : "applied " + list);
+				config = std::move(next);
+			} catch (const std::exception &e) {
+				spdlog::error("reload refused, the running configuration stays: {}", e.what());
+			}
+		}
+		sd_notifyf(0, "READY=1\nSTATUS=streaming %s on %s", pipeline->source_info().name.c_str(),
+			   config.output.socket.c_str());
+	};
+
 	for (;;) {
-		const int sig = wait_signal(signals, tick_s);
+		const int sig = wait_signal(signals, ready ? tick_s : std::min(tick_s, 0.05));
 		if (sig == SIGTERM || sig == SIGINT) {
 			spdlog::info("{}: draining and stopping", sig == SIGTERM ? "SIGTERM" : "SIGINT");
 			sd_notify(0, "STOPPING=1");
-			pipeline.request_stop();
-			pipeline.wait();
+			pipeline->request_stop();
+			pipeline->wait();
 			break;
 		}
 		if (sig == SIGHUP)
-			spdlog::info("SIGHUP: configuration reload is not supported yet; ignored");
-		if (watchdog)
-			sd_notify(0, "WATCHDOG=1");
+			reload_config();
+		const PipelineStats snapshot = pipeline->stats();
+		if (!ready && snapshot.frames_published > 0) {
+			ready = true;
+			spdlog::info("first frame published: ready");
+			sd_notifyf(0, "READY=1\nSTATUS=streaming %s on %s", pipeline->source_info().name.c_str(),
+				   config.output.socket.c_str());
+		}
+		if (watchdog) {
+			const WatchdogSample sample{snapshot.frames_captured, snapshot.frames_published,
+						    snapshot.capture_turn_ns};
+			const bool alive = pipeline_alive(last_sample, sample, monotonic_ns(), watchdog_limit_ns);
+			if (alive)
+				sd_notify(0, "WATCHDOG=1");
+			if (alive == watchdog_withheld) { // said once per change, not every tick
+				watchdog_withheld = !alive;
+				if (alive)
+					spdlog::info("watchdog: frames get through again; pinging");
+				else
+					spdlog::error("watchdog: {}; not pinging (systemd will restart the service)",
+						      sample.captured > last_sample.captured
+							      ? "frames come in but none are published"
+							      : "the capture loop stopped turning");
+			}
+			last_sample = sample;
+		}
 		const int64_t now = monotonic_ns();
 		if (now >= next_status_ns) {
 			next_status_ns = now + static_cast<int64_t>(config.output.status_interval_s * 1e9);
@@ -292,15 +448,15 @@ int run_daemon(const DaemonConfig &config)
 					clients.clients_dropped, clients.clients_refused);
 			}
 		}
-		if (pipeline.finished()) {
+		if (pipeline->finished()) {
 			spdlog::info("source finished");
-			for (const auto &line : pipeline.source_report())
+			for (const auto &line : pipeline->source_report())
 				spdlog::info("{}", line);
 			break;
 		}
 	}
 	emit_status();
-	const auto final_stats = pipeline.stats();
+	const auto final_stats = pipeline->stats();
 	spdlog::info("stopped: {} frames captured, {} published{}", final_stats.frames_captured,
 		     final_stats.frames_published,
 		     final_stats.dropped_at_stop > 0

@@ -1,14 +1,17 @@
 #pragma once
 // The two ways to run the pipeline: as the daemon (a live source, the socket, status messages, signals,
 // systemd notification) and as a batch job (a file source, as fast as possible, NDJSON to a file).
+#include <functional>
 #include <string>
 
 #include "daemon/config.hpp"
 
 namespace stereod::daemon {
 
-/// Runs until SIGTERM/SIGINT (drains, returns 0) or until a finite source ends.
-int run_daemon(const DaemonConfig &config);
+/// Runs until SIGTERM/SIGINT (drains, returns 0) or until a finite source ends. On SIGHUP, `reload` gives
+/// the configuration to switch to (it throws ConfigError for one that does not load); empty: SIGHUP is
+/// logged and ignored.
+int run_daemon(const DaemonConfig &config, const std::function<DaemonConfig()> &reload = {});
 
 struct BatchOptions {
 	std::string output;    ///< NDJSON file, "-" for standard output

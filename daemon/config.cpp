@@ -868,6 +868,15 @@ void validate(const DaemonConfig &config, const std::string &origin)
 	}
 }
 
+std::vector<std::string> changed_options(const DaemonConfig &a, const DaemonConfig &b)
+{
+	std::vector<std::string> changed;
+	for (const auto &option : options())
+		if (option.show(a) != option.show(b))
+			changed.push_back(option.section + "." + option.key);
+	return changed;
+}
+
 std::string default_config_text()
 {
 	const DaemonConfig defaults;

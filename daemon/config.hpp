@@ -62,5 +62,7 @@ void validate(const DaemonConfig &config, const std::string &origin);
 std::string describe_cut(const std::string &text, size_t limit = 80);
 /// A complete, commented config file holding every option at its default.
 std::string default_config_text();
+/// The options (`section.key`) whose values differ between two configs, in the config file's order.
+std::vector<std::string> changed_options(const DaemonConfig &a, const DaemonConfig &b);
 
 } // namespace stereod::daemon

@@ -54,11 +54,16 @@ int main(int argc, char **argv)
 				std::cout << name << "\t" << registry.summary(name) << "\n";
 			return 0;
 		}
-		daemon::DaemonConfig config;
-		if (!config_path.empty())
-			daemon::load_config_file(config_path, config);
-		for (const auto &assignment : overrides)
-			daemon::apply_override(assignment, config);
+		// The file, then the overrides: at start, and again on SIGHUP (the overrides keep applying).
+		const auto load = [&config_path, &overrides] {
+			daemon::DaemonConfig loaded;
+			if (!config_path.empty())
+				daemon::load_config_file(config_path, loaded);
+			for (const auto &assignment : overrides)
+				daemon::apply_override(assignment, loaded);
+			return loaded;
+		};
+		daemon::DaemonConfig config = load();
 
 		if (*process) {
 			config.source.driver = daemon::driver_for_format(format, input);
@@ -69,7 +74,7 @@ int main(int argc, char **argv)
 			batch.progress = !no_progress;
 			return daemon::run_batch(config, batch);
 		}
-		return daemon::run_daemon(config);
+		return daemon::run_daemon(config, config_path.empty() ? std::function<daemon::DaemonConfig()>() : load);
 	} catch (const daemon::ConfigError &e) {
 		std::cerr << "stereod: " << e.what() << "\n";
 		return 2;

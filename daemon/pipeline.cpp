@@ -31,6 +31,7 @@ Pipeline::~Pipeline()
 
 void Pipeline::start()
 {
+	capture_turn_ns_.store(monotonic_ns());
 	publish_thread_ = std::thread([this] { publish_loop(); });
 	for (size_t i = 0; i < options_.workers; ++i)
 		workers_.emplace_back([this] { worker_loop(); });
@@ -68,6 +69,7 @@ void Pipeline::set_state(const char *state)
 PipelineStats Pipeline::stats() const
 {
 	PipelineStats s;
+	s.capture_turn_ns = capture_turn_ns_.load();
 	{
 		std::lock_guard lock(state_mutex_);
 		s.source_state = state_;
@@ -97,6 +99,7 @@ void Pipeline::capture_loop()
 	set_state("streaming");
 	auto backoff = std::chrono::milliseconds(100);
 	while (!stop_.load()) {
+		capture_turn_ns_.store(monotonic_ns());
 		std::optional<FrameHandle> frame =
 			live ? pool_.try_acquire() : pool_.acquire_waiting([this] { return stop_.load(); });
 		if (!frame && !live)
@@ -117,6 +120,7 @@ void Pipeline::capture_loop()
 		if (status == drivers::GrabStatus::Lost) {
 			set_state("reconnecting");
 			while (!stop_.load()) {
+				capture_turn_ns_.store(monotonic_ns());
 				std::this_thread::sleep_for(backoff);
 				backoff = std::min(backoff * 2, std::chrono::milliseconds(2000));
 				if (source_->reconnect()) {

@@ -56,6 +56,7 @@ struct PipelineStats {
 	uint64_t processing_errors = 0; ///< frames a stage threw on
 	uint64_t reconnects = 0;
 	uint64_t dropped_at_stop = 0; ///< live backlog left unprocessed when the drain time ran out
+	int64_t capture_turn_ns = 0;  ///< CLOCK_MONOTONIC of the capture loop's last turn (daemon/watchdog.hpp)
 	protocol::LatencySummary capture_to_publish;
 	std::optional<protocol::StatusReport::StereoHealth> stereo; ///< stereo sources: calibration health
 };
@@ -135,6 +136,7 @@ private:
 	std::atomic<uint64_t> captured_{0}, published_{0}, pool_exhausted_{0}, source_gaps_{0}, corrupt_{0},
 		processing_errors_{0}, reconnects_{0}, dropped_at_stop_{0};
 	std::atomic<int64_t> stop_deadline_ns_{0};
+	std::atomic<int64_t> capture_turn_ns_{0}; ///< the capture loop's last turn (for the watchdog)
 	mutable std::mutex state_mutex_;
 	std::string state_ = "starting";
 	LatencyWindow latency_{2048};

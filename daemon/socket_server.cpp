@@ -115,6 +115,19 @@ SocketServer::~SocketServer()
 		::close(reserve_fd_);
 }
 
+void SocketServer::set_limits(const SocketServerOptions &options)
+{
+	std::lock_guard lock(mutex_);
+	options_.client_queue = options.client_queue;
+	options_.client_queue_bytes = options.client_queue_bytes;
+	options_.client_max_input = options.client_max_input;
+	options_.max_clients = options.max_clients;
+	if (options.mode != options_.mode) {
+		options_.mode = options.mode;
+		::chmod(options_.path.c_str(), static_cast<mode_t>(options_.mode));
+	}
+}
+
 void SocketServer::set_greeting(std::string line)
 {
 	line.push_back('\n');

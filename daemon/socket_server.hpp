@@ -50,6 +50,9 @@ public:
 
 	/// Sent first to every new client.
 	void set_greeting(std::string line);
+	/// New limits and socket mode (a reload); the path stays. Clients stay connected; a limit lowered below
+	/// what a client holds applies from its next message.
+	void set_limits(const SocketServerOptions &options);
 	/// Queues one line (without its newline) for every connected client. Thread-safe, never blocks on I/O.
 	void publish(std::string line);
 	[[nodiscard]] SocketServerStats stats() const;

@@ -20,11 +20,15 @@ packages=(
   opencv-doc
   # tools the tests and the README use as real clients
   socat jq procps
+  # the Debian package (cmake --build build --target package): dpkg-shlibdeps computes its Depends
+  dpkg-dev
 )
 
 if $test_beds; then
   # camera test beds: fake GigE cameras in a private network namespace; V4L2 drivers in a QEMU-booted kernel
   packages+=(aravis-tools aravis-tools-cli iproute2 util-linux qemu-system-x86 busybox-static cpio kmod v4l-utils)
+  # the service's unit checks (systemd-analyze verify / security)
+  packages+=(systemd)
 fi
 
 missing=()

@@ -1,7 +1,7 @@
 // The Aravis capture source: one camera carrying both eyes, or two cameras paired by device timestamp.
 //
 // grab() runs on the pipeline's capture thread. With two cameras it keeps at most one popped buffer per
-// camera; when both are held, their host-mapped timestamps decide: a pair within max_skew is copied into
+// camera; when both are held, their timestamps decide (see skew()): a pair within max_skew is copied into
 // the pool frame, otherwise the older buffer has lost its partner and is given back, counted as unpaired.
 // A camera that raises control-lost, or sends nothing for no_frame_timeout_s, makes grab() return Lost;
 // reconnect() rebuilds the cameras that failed, and the pipeline keeps its clients meanwhile.
@@ -193,20 +193,18 @@ public:
 			CameraState &right = cams_[kRight];
 			if (!right.has_pending && !take(right, wait_us))
 				continue;
-			switch (camera::pair_action(left.pending_host, right.pending_host, max_skew_ns_)) {
+			switch (camera::pair_action(0, skew(left, right), max_skew_ns_)) {
 			case camera::PairAction::Pair:
 				return emit(into, left, &right);
 			case camera::PairAction::DropLeft:
 				spdlog::debug("aravis: left frame {} unpaired: right {} is {} ns later",
-					      left.pending.frame_id, right.pending.frame_id,
-					      right.pending_host - left.pending_host);
+					      left.pending.frame_id, right.pending.frame_id, skew(left, right));
 				release_pending(left);
 				count_unpaired();
 				break;
 			case camera::PairAction::DropRight:
 				spdlog::debug("aravis: right frame {} unpaired: left {} is {} ns later",
-					      right.pending.frame_id, left.pending.frame_id,
-					      left.pending_host - right.pending_host);
+					      right.pending.frame_id, left.pending.frame_id, -skew(left, right));
 				release_pending(right);
 				count_unpaired();
 				break;
@@ -376,6 +374,18 @@ private:
 	/// (an outage's own cost is counted by reconnect()).
 	void count_unpaired() { (paired_once_ ? unpaired_ : startup_unpaired_).fetch_add(1); }
 
+	/// Right minus left exposure time of the two pending frames. Cameras on one clock (PTP, or `clock =
+	/// shared`) are compared on their own stamps: mapping each through the clock fit at a different moment
+	/// would add the fit's own movement in between, which while the fit is young is up to the host's arrival
+	/// jitter (on a loaded 2-core machine, enough to break pairs of frames exposed together). Otherwise each
+	/// camera's stamps are mapped onto the host clock by its own fit, and those are compared.
+	[[nodiscard]] int64_t skew(const CameraState &left, const CameraState &right) const
+	{
+		if (shared_clock_ && left.pending.device_ns != 0 && right.pending.device_ns != 0)
+			return right.pending.device_ns - left.pending.device_ns;
+		return right.pending_host - left.pending_host;
+	}
+
 	/// Pops the next buffer of one camera into its pending slot.
 	bool take(CameraState &state, uint64_t timeout_us)
 	{
@@ -458,7 +468,7 @@ private:
 		into.sequence = sequence_;
 		into.device_ns = left.pending_host;
 		into.host_ns = right ? std::max(l.arrival_ns, right->pending.arrival_ns) : l.arrival_ns;
-		into.lr_skew_ns = right ? right->pending_host - left.pending_host : 0;
+		into.lr_skew_ns = right ? skew(left, *right) : 0;
 		paired_once_ = true;
 		if (right) {
 			skew_last_.store(into.lr_skew_ns);

@@ -110,3 +110,22 @@ TEST(Pipeline, StopDrainsWhatWasCaptured)
 	EXPECT_GT(count, 5U);
 	EXPECT_EQ(pipeline.stats().source_state, "stopped");
 }
+
+// ------------------------------------------------------------------------------------------ watchdog
+#include "daemon/watchdog.hpp"
+
+TEST(Watchdog, PingsOnlyWhileFramesGetThrough)
+{
+	using stereod::daemon::pipeline_alive;
+	using stereod::daemon::WatchdogSample;
+	constexpr int64_t kNow = 10'000'000'000, kLimit = 2'000'000'000;
+	const WatchdogSample before{100, 95, kNow - 50'000'000};
+	// Frames in and out: alive.
+	EXPECT_TRUE(pipeline_alive(before, {110, 104, kNow - 10'000'000}, kNow, kLimit));
+	// Nothing in (a camera away, the source reconnecting): not the pipeline's fault, alive.
+	EXPECT_TRUE(pipeline_alive(before, {100, 95, kNow - 10'000'000}, kNow, kLimit));
+	// Frames in, none out: a hung stage.
+	EXPECT_FALSE(pipeline_alive(before, {110, 95, kNow - 10'000'000}, kNow, kLimit));
+	// The capture loop stopped turning (a driver call that never returns), whatever the counters say.
+	EXPECT_FALSE(pipeline_alive(before, {100, 95, kNow - 3'000'000'000}, kNow, kLimit));
+}
