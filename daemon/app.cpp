@@ -7,7 +7,9 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <grp.h>
 #include <iostream>
+#include <pwd.h>
 #include <thread>
 #include <unistd.h>
 
@@ -156,6 +158,7 @@ protocol::StatusReport make_status(const Pipeline &pipeline, const PipelineStats
 	report.drops["client_queue"] = server.messages_dropped;
 	report.drops["clients_dropped"] = server.clients_dropped;
 	report.drops["clients_refused"] = server.clients_refused;
+	report.drops["clients_denied"] = server.clients_denied;
 	report.clients = server.clients;
 	report.capture_to_publish = s.capture_to_publish;
 	report.stereo = s.stereo;
@@ -228,14 +231,39 @@ std::string driver_for_format(const std::string &format, const std::string &path
 
 namespace {
 
+/// A user or group given by name or number, as this machine knows it; ConfigError naming the key otherwise.
+uint32_t resolve_id(const std::string &key, const std::string &name, bool is_group)
+{
+	char *end = nullptr;
+	const unsigned long number = std::strtoul(name.c_str(), &end, 10);
+	if (!name.empty() && end != nullptr && *end == '\0')
+		return static_cast<uint32_t>(number);
+	if (is_group) {
+		if (const struct group *g = ::getgrnam(name.c_str()))
+			return g->gr_gid;
+	} else if (const struct passwd *p = ::getpwnam(name.c_str())) {
+		return p->pw_uid;
+	}
+	throw ConfigError("output." + key + ": no " + (is_group ? "group" : "user") + " '" + describe_cut(name) +
+			  "' on this machine");
+}
+
 SocketServerOptions server_options(const OutputConfig &output)
 {
-	return {output.socket,
-		output.socket_mode,
-		static_cast<size_t>(output.client_queue),
-		static_cast<size_t>(output.client_max_input),
-		static_cast<size_t>(output.max_clients),
-		static_cast<size_t>(output.client_queue_bytes)};
+	SocketServerOptions o;
+	o.path = output.socket;
+	o.mode = output.socket_mode;
+	o.client_queue = static_cast<size_t>(output.client_queue);
+	o.client_max_input = static_cast<size_t>(output.client_max_input);
+	o.max_clients = static_cast<size_t>(output.max_clients);
+	o.client_queue_bytes = static_cast<size_t>(output.client_queue_bytes);
+	for (const auto &user : output.allow_users)
+		o.allow_uids.push_back(resolve_id("allow_users", user, false));
+	for (const auto &group : output.allow_groups)
+		o.allow_gids.push_back(resolve_id("allow_groups", group, true));
+	if (!output.socket_group.empty())
+		o.socket_gid = resolve_id("socket_group", output.socket_group, true);
+	return o;
 }
 
 /// The options a reload applies while everything keeps running; any other change rebuilds the source and the
@@ -244,7 +272,8 @@ bool applies_live(const std::string &option)
 {
 	return option == "log.level" || option == "output.status_interval_s" || option == "output.socket_mode" ||
 	       option == "output.client_queue" || option == "output.client_queue_bytes" ||
-	       option == "output.max_clients" || option == "output.client_max_input";
+	       option == "output.max_clients" || option == "output.client_max_input" ||
+	       option == "output.socket_group" || option == "output.allow_users" || option == "output.allow_groups";
 }
 
 } // namespace
@@ -255,7 +284,8 @@ int run_daemon(const DaemonConfig &initial, const std::function<DaemonConfig()> 
 	set_log_level(config.log.level);
 	const sigset_t signals = block_signals();
 	const auto registry = drivers::SourceRegistry::with_builtin_drivers();
-	SocketServer server(server_options(config.output));
+	// Made with the first source, so that its first client already gets the right `hello`.
+	std::unique_ptr<SocketServer> server;
 	const uint64_t hang_after = hang_publish_after();
 	uint64_t sunk = 0; // publisher thread only
 
@@ -269,6 +299,15 @@ int run_daemon(const DaemonConfig &initial, const std::function<DaemonConfig()> 
 			     info.geometry.stereo ? "stereo, " : "", info.geometry.depth ? "depth, " : "",
 			     info.geometry.nominal_fps);
 		PipelineOptions o = pipeline_options(c, info, info.live);
+		std::string hello =
+			protocol::hello_message(monotonic_ns(), info.name, info.geometry.width, info.geometry.height);
+		if (!server) {
+			SocketServerOptions server_opts = server_options(c.output);
+			server_opts.greeting = std::move(hello);
+			server = std::make_unique<SocketServer>(std::move(server_opts));
+		} else {
+			server->set_greeting(std::move(hello));
+		}
 		auto built = std::make_unique<Pipeline>(
 			std::move(source), o, [&server, hang_after, &sunk](FrameResult &result) {
 				if (hang_after > 0 && ++sunk > hang_after) {
@@ -277,10 +316,8 @@ int run_daemon(const DaemonConfig &initial, const std::function<DaemonConfig()> 
 					for (;;)
 						std::this_thread::sleep_for(std::chrono::hours(1));
 				}
-				server.publish(protocol::frame_message(result));
+				server->publish(protocol::frame_message(result));
 			});
-		server.set_greeting(
-			protocol::hello_message(monotonic_ns(), info.name, info.geometry.width, info.geometry.height));
 		built->start();
 		spdlog::info("streaming on {} ({} workers, ring {} {})", c.output.socket, o.workers, o.ring_capacity,
 			     to_string(o.overflow));
@@ -309,14 +346,14 @@ int run_daemon(const DaemonConfig &initial, const std::function<DaemonConfig()> 
 	RateMeter meter;
 	bool calibration_warned = false;
 	auto emit_status = [&] {
-		const SocketServerStats server_stats = server.stats();
+		const SocketServerStats server_stats = server->stats();
 		const PipelineStats s = pipeline->stats();
 		const auto [capture_fps, publish_fps] = meter.update(s.frames_captured, s.frames_published);
 		const auto report = make_status(*pipeline, s, server_stats, start_ns, capture_fps, publish_fps);
-		server.publish(protocol::status_message(report));
+		server->publish(protocol::status_message(report));
 		uint64_t frames_dropped = 0;
 		for (const auto &[name, count] : report.drops)
-			frames_dropped += name == "client_queue" ? 0 : count; // that one counts messages, not frames
+			frames_dropped += name.rfind("client", 0) == 0 ? 0 : count; // those count messages or clients
 		sd_notifyf(0, "STATUS=%s %s: %.1f fps, %llu frames dropped, %zu clients", report.source_state.c_str(),
 			   report.source.c_str(), report.publish_fps, static_cast<unsigned long long>(frames_dropped),
 			   report.clients);
@@ -353,11 +390,12 @@ int run_daemon(const DaemonConfig &initial, const std::function<DaemonConfig()> 
 						     config.output.socket);
 					next.output.socket = config.output.socket;
 				}
+				const SocketServerOptions next_server = server_options(next.output); // may refuse
 				const std::vector<std::string> changed = changed_options(config, next);
 				const bool rebuild = std::any_of(changed.begin(), changed.end(),
 								 [](const std::string &o) { return !applies_live(o); });
 				set_log_level(next.log.level);
-				server.set_limits(server_options(next.output));
+				server->set_limits(next_server);
 				tick_s = tick_for(next);
 				if (rebuild) {
 					spdlog::info("reload: rebuilding the source and the pipeline");
@@ -379,7 +417,7 @@ int run_daemon(const DaemonConfig &initial, const std::function<DaemonConfig()> 
 					// Connected clients hear of the new source (its frames' seq start again) as a
 					// new client would.
 					const drivers::SourceInfo &info = pipeline->source_info();
-					server.publish(protocol::hello_message(
+					server->publish(protocol::hello_message(
 						monotonic_ns(), info.name, info.geometry.width, info.geometry.height));
 				}
 				std::string list;
@@ -437,7 +475,7 @@ int run_daemon(const DaemonConfig &initial, const std::function<DaemonConfig()> 
 			const auto report = emit_status();
 			if (now >= next_log_ns) {
 				next_log_ns = now + 10'000'000'000;
-				const SocketServerStats clients = server.stats();
+				const SocketServerStats clients = server->stats();
 				spdlog::info(
 					"status: {} {:.1f} fps captured, {:.1f} published, latency p50 {:.1f} ms p99 "
 					"{:.1f} ms, {} clients ({} connected, {} hung up, {} dropped, {} refused "

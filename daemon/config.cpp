@@ -678,6 +678,15 @@ const std::vector<Option> &options()
 		o.push_back(number(
 			"output", "status_interval_s", "seconds between status messages",
 			[](DaemonConfig &c) -> double & { return c.output.status_interval_s; }, 0.05, 3600));
+		o.push_back(text("output", "socket_group", "group owning the socket file; empty: the daemon's own",
+				 [](DaemonConfig &c) -> std::string & { return c.output.socket_group; }));
+		o.push_back(text_list(
+			"output", "allow_users",
+			"users (names or uids) who may read; both lists empty: anyone the socket mode lets in",
+			[](DaemonConfig &c) -> std::vector<std::string> & { return c.output.allow_users; }));
+		o.push_back(
+			text_list("output", "allow_groups", "members of these groups (names or gids) may read",
+				  [](DaemonConfig &c) -> std::vector<std::string> & { return c.output.allow_groups; }));
 		// [log]
 		o.push_back(text("log", "level", "trace | debug | info | warn | error",
 				 [](DaemonConfig &c) -> std::string & { return c.log.level; },

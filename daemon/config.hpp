@@ -26,6 +26,9 @@ struct OutputConfig {
 	int client_queue_bytes = 8 << 20; ///< bytes queued per client before its oldest messages are dropped
 	int max_clients = 64;		  ///< clients served at once; more are refused with an error line
 	double status_interval_s = 1.0;
+	std::string socket_group;	       ///< group owning the socket file; empty: the daemon's own
+	std::vector<std::string> allow_users;  ///< who may read (names or uids); with allow_groups empty: anyone
+	std::vector<std::string> allow_groups; ///< members of these groups may read (names or gids)
 };
 
 struct LogConfig {

@@ -1,5 +1,6 @@
 #include "daemon/socket_server.hpp"
 
+#include <algorithm>
 #include <cerrno>
 #include <cstring>
 #include <fcntl.h>
@@ -33,6 +34,19 @@ bool someone_listens(const std::string &path)
 }
 
 } // namespace
+
+bool peer_allowed(uid_t uid, const std::vector<gid_t> &groups, const SocketServerOptions &options, uid_t self)
+{
+	if (options.allow_uids.empty() && options.allow_gids.empty())
+		return true;
+	if (uid == 0 || uid == self)
+		return true;
+	if (std::find(options.allow_uids.begin(), options.allow_uids.end(), uid) != options.allow_uids.end())
+		return true;
+	return std::any_of(groups.begin(), groups.end(), [&](gid_t g) {
+		return std::find(options.allow_gids.begin(), options.allow_gids.end(), g) != options.allow_gids.end();
+	});
+}
 
 sockaddr_un unix_socket_address(const std::string &path)
 {
@@ -72,6 +86,15 @@ SocketServer::SocketServer(SocketServerOptions options) : options_(std::move(opt
 	}
 	// chmod after bind: the mode must not depend on the process umask.
 	::chmod(options_.path.c_str(), static_cast<mode_t>(options_.mode));
+	if (options_.socket_gid != static_cast<gid_t>(-1) &&
+	    ::chown(options_.path.c_str(), static_cast<uid_t>(-1), options_.socket_gid) != 0) {
+		const int err = errno;
+		::close(listen_fd_);
+		::unlink(options_.path.c_str());
+		throw std::runtime_error(options_.path + ": cannot give the socket to group " +
+					 std::to_string(options_.socket_gid) +
+					 " (output.socket_group): " + std::strerror(err));
+	}
 	if (::listen(listen_fd_, 64) != 0) {
 		const int err = errno;
 		::close(listen_fd_);
@@ -87,6 +110,8 @@ SocketServer::SocketServer(SocketServerOptions options) : options_(std::move(opt
 	ev.data.fd = wake_fd_;
 	::epoll_ctl(epoll_fd_, EPOLL_CTL_ADD, wake_fd_, &ev);
 	reserve_fd_ = ::open("/dev/null", O_RDONLY | O_CLOEXEC);
+	if (!options_.greeting.empty()) // before the first client can be accepted
+		greeting_ = std::make_shared<const std::string>(options_.greeting + "\n");
 	thread_ = std::thread([this] { run(); });
 }
 
@@ -122,6 +147,14 @@ void SocketServer::set_limits(const SocketServerOptions &options)
 	options_.client_queue_bytes = options.client_queue_bytes;
 	options_.client_max_input = options.client_max_input;
 	options_.max_clients = options.max_clients;
+	options_.allow_uids = options.allow_uids;
+	options_.allow_gids = options.allow_gids;
+	if (options.socket_gid != options_.socket_gid && options.socket_gid != static_cast<gid_t>(-1)) {
+		options_.socket_gid = options.socket_gid;
+		if (::chown(options_.path.c_str(), static_cast<uid_t>(-1), options_.socket_gid) != 0)
+			spdlog::error("socket: cannot give {} to group {} (output.socket_group): {}", options_.path,
+				      options_.socket_gid, std::strerror(errno));
+	}
 	if (options.mode != options_.mode) {
 		options_.mode = options.mode;
 		::chmod(options_.path.c_str(), static_cast<mode_t>(options_.mode));
@@ -273,6 +306,8 @@ void SocketServer::accept_clients()
 			}
 			continue;
 		}
+		if (!admit(fd))
+			continue;
 		if (clients_.size() >= options_.max_clients) {
 			refuse(fd, "too many clients");
 			continue;
@@ -307,6 +342,45 @@ void SocketServer::refuse(int fd, const char *why)
 		refusals_unlogged_ = 0;
 		next_refusal_log_ns_ = now + 10'000'000'000;
 	}
+}
+
+bool SocketServer::admit(int fd)
+{
+	if (options_.allow_uids.empty() && options_.allow_gids.empty())
+		return true;
+	ucred cred{};
+	socklen_t len = sizeof(cred);
+	std::vector<gid_t> groups;
+	if (::getsockopt(fd, SOL_SOCKET, SO_PEERCRED, &cred, &len) == 0) {
+		groups.push_back(cred.gid);
+		// The groups the peer process really holds (a client given groups at run time, e.g. by systemd's
+		// SupplementaryGroups=, is not in /etc/group).
+		gid_t supplementary[256];
+		socklen_t bytes = sizeof(supplementary);
+		if (::getsockopt(fd, SOL_SOCKET, SO_PEERGROUPS, supplementary, &bytes) == 0)
+			groups.insert(groups.end(), supplementary, supplementary + bytes / sizeof(gid_t));
+		if (peer_allowed(cred.uid, groups, options_, ::geteuid()))
+			return true;
+	} else {
+		cred.uid = static_cast<uid_t>(-1); // unknown peer: refused
+	}
+	const std::string line =
+		protocol::error_message(monotonic_ns(), "not allowed: uid " + std::to_string(cred.uid) +
+								" is not in output.allow_users or a group of "
+								"output.allow_groups") +
+		"\n";
+	(void)!::send(fd, line.data(), line.size(), MSG_DONTWAIT | MSG_NOSIGNAL);
+	::close(fd);
+	++stats_.clients_denied;
+	++denials_unlogged_;
+	const int64_t now = monotonic_ns();
+	if (now >= next_denial_log_ns_) { // at most one line every 10 s, however many knock
+		spdlog::warn("socket: refused {} client(s) not allowed to read (last: uid {}, pid {})",
+			     denials_unlogged_, cred.uid, cred.pid);
+		denials_unlogged_ = 0;
+		next_denial_log_ns_ = now + 10'000'000'000;
+	}
+	return false;
 }
 
 bool SocketServer::flush(int fd, Client &client)

@@ -11,6 +11,9 @@
 #include <mutex>
 #include <string>
 #include <thread>
+#include <vector>
+
+#include <sys/types.h>
 
 #include <sys/un.h>
 
@@ -27,7 +30,19 @@ struct SocketServerOptions {
 	size_t client_max_input = 4096;
 	size_t max_clients = 64;		     ///< more are refused with an error line and counted
 	size_t client_queue_bytes = 8 * 1024 * 1024; ///< a client's queue is also bounded in bytes
+	/// Who may read (SO_PEERCRED / SO_PEERGROUPS): a client whose uid is listed, or whose primary or
+	/// supplementary groups include a listed gid. Both empty: anyone the socket file's mode lets connect.
+	/// Root and the daemon's own user are always let in.
+	std::vector<uid_t> allow_uids{};
+	std::vector<gid_t> allow_gids{};
+	/// Group owning the socket file (the daemon must belong to it); -1: the daemon's own.
+	gid_t socket_gid = static_cast<gid_t>(-1);
+	/// Sent first to every client (one line, without its newline); set_greeting() changes it later.
+	std::string greeting{};
 };
+
+/// Whether a peer may read: the access rule of SocketServerOptions::allow_uids / allow_gids, pure.
+bool peer_allowed(uid_t uid, const std::vector<gid_t> &groups, const SocketServerOptions &options, uid_t self);
 
 struct SocketServerStats {
 	size_t clients = 0;
@@ -36,6 +51,7 @@ struct SocketServerStats {
 	uint64_t clients_dropped = 0;  ///< clients disconnected for misbehaving
 	uint64_t clients_closed = 0;   ///< clients that hung up
 	uint64_t clients_refused = 0;  ///< connections refused: client limit reached or out of file descriptors
+	uint64_t clients_denied = 0;   ///< connections refused: the peer's user and groups are not allowed
 };
 
 class SocketServer
@@ -50,8 +66,9 @@ public:
 
 	/// Sent first to every new client.
 	void set_greeting(std::string line);
-	/// New limits and socket mode (a reload); the path stays. Clients stay connected; a limit lowered below
-	/// what a client holds applies from its next message.
+	/// New limits, access lists, socket mode and group (a reload); the path stays. Clients stay connected
+	/// (access lists apply to new connections); a limit lowered below what a client holds applies from its
+	/// next message.
 	void set_limits(const SocketServerOptions &options);
 	/// Queues one line (without its newline) for every connected client. Thread-safe, never blocks on I/O.
 	void publish(std::string line);
@@ -75,6 +92,9 @@ private:
 	void accept_clients();
 	/// Accepts one pending connection only to tell it why it is refused, then closes it.
 	void refuse(int fd, const char *why);
+	/// True when the peer on `fd` may read (options_.allow_uids / allow_gids); otherwise tells it, closes it,
+	/// counts it and returns false.
+	bool admit(int fd);
 	/// Called with mutex_ held. Returns false when the client was closed (and erased).
 	bool flush(int fd, Client &client);
 	void drop_oldest(Client &client);
@@ -89,6 +109,8 @@ private:
 	int64_t next_refusal_log_ns_ = 0;
 	int64_t listen_paused_until_ns_ = 0; ///< out of descriptors: not watching for connections until then
 	uint64_t refusals_unlogged_ = 0;
+	uint64_t denials_unlogged_ = 0;
+	int64_t next_denial_log_ns_ = 0;
 	std::atomic<bool> stop_{false};
 	mutable std::mutex mutex_;
 	std::map<int, Client> clients_;

@@ -344,3 +344,19 @@ TEST(SocketServerDefects, QueueIsBoundedInBytes)
 		<< server.stats().messages_dropped;
 	::close(idle);
 }
+
+TEST(SocketServerAccess, PeerRuleByUserAndGroups)
+{
+	SocketServerOptions options;
+	constexpr uid_t kSelf = 990;
+	// No lists: anyone the file mode lets connect.
+	EXPECT_TRUE(peer_allowed(1234, {1234}, options, kSelf));
+	options.allow_uids = {1001};
+	options.allow_gids = {44};
+	EXPECT_TRUE(peer_allowed(1001, {1001}, options, kSelf)) << "listed user";
+	EXPECT_TRUE(peer_allowed(1002, {1002, 44}, options, kSelf)) << "supplementary group listed";
+	EXPECT_TRUE(peer_allowed(1003, {44}, options, kSelf)) << "primary group listed";
+	EXPECT_FALSE(peer_allowed(1004, {1004, 100}, options, kSelf));
+	EXPECT_TRUE(peer_allowed(0, {0}, options, kSelf)) << "root";
+	EXPECT_TRUE(peer_allowed(kSelf, {kSelf}, options, kSelf)) << "the daemon's own user";
+}
