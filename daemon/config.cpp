@@ -847,7 +847,12 @@ void apply_override(const std::string &assignment, DaemonConfig &config)
 				  describe_cut(section + "." + key) + "'");
 	// Bare words are strings: --set source.driver=video (or aravis.left=127.0.0.1, which is no TOML number)
 	// works without shell-quoted TOML quotes. Anything else is read as TOML.
-	const bool bare_word = !value.empty() && value.find_first_of("\"'[{") == std::string::npos && value != "true" &&
+	// TOML's prefixed integers (0o660 for a socket mode, 0x..., 0b...) are numbers, not words.
+	const bool prefixed_integer = value.size() > 2 && value[0] == '0' &&
+				      (value[1] == 'o' || value[1] == 'x' || value[1] == 'b') &&
+				      value.find_first_not_of("0123456789abcdefABCDEF_", 2) == std::string::npos;
+	const bool bare_word = !value.empty() && !prefixed_integer &&
+			       value.find_first_of("\"'[{") == std::string::npos && value != "true" &&
 			       value != "false" && value.find_first_not_of("0123456789+-.eE_") != std::string::npos;
 	const bool dotted_number = value.find_first_not_of("0123456789.") == std::string::npos &&
 				   std::count(value.begin(), value.end(), '.') > 1;

@@ -103,6 +103,14 @@ TEST(Config, OverridesTakeBareWordsAndNumbers)
 	EXPECT_FALSE(config.source.sim.stereo);
 	EXPECT_THROW(apply_override("sim.nope=1", config), ConfigError);
 	EXPECT_THROW(apply_override("sim.width=1", config), ConfigError);
+	// TOML's octal form, as the default config shows the socket mode, is a number (it was taken as a word).
+	apply_override("output.socket_mode=0o640", config);
+	EXPECT_EQ(config.output.socket_mode, 0640);
+	apply_override("output.socket_mode=0x1a4", config);
+	EXPECT_EQ(config.output.socket_mode, 0644);
+	// A word that only starts like one stays a word.
+	apply_override("aravis.left=0xcamera", config);
+	EXPECT_EQ(config.source.aravis.left, "0xcamera");
 }
 
 TEST(Config, DefaultConfigTextParsesBackToTheDefaults)
