@@ -10,6 +10,7 @@
 #include <grp.h>
 #include <iostream>
 #include <pwd.h>
+#include <stdexcept>
 #include <thread>
 #include <unistd.h>
 
@@ -289,6 +290,9 @@ int run_daemon(const DaemonConfig &initial, const std::function<DaemonConfig()> 
 	const uint64_t hang_after = hang_publish_after();
 	uint64_t sunk = 0; // publisher thread only
 
+	auto hello_for = [](const drivers::SourceInfo &info) {
+		return protocol::hello_message(monotonic_ns(), info.name, info.geometry.width, info.geometry.height);
+	};
 	// The source and the pipeline: built at start, and again in place when a reload changes what they use.
 	PipelineOptions options;
 	auto build_pipeline = [&](const DaemonConfig &c) {
@@ -299,8 +303,7 @@ int run_daemon(const DaemonConfig &initial, const std::function<DaemonConfig()> 
 			     info.geometry.stereo ? "stereo, " : "", info.geometry.depth ? "depth, " : "",
 			     info.geometry.nominal_fps);
 		PipelineOptions o = pipeline_options(c, info, info.live);
-		std::string hello =
-			protocol::hello_message(monotonic_ns(), info.name, info.geometry.width, info.geometry.height);
+		std::string hello = hello_for(info);
 		if (!server) {
 			SocketServerOptions server_opts = server_options(c.output);
 			server_opts.greeting = std::move(hello);
@@ -325,6 +328,10 @@ int run_daemon(const DaemonConfig &initial, const std::function<DaemonConfig()> 
 		return built;
 	};
 	std::unique_ptr<Pipeline> pipeline = build_pipeline(config);
+	auto notify_ready = [&] {
+		sd_notifyf(0, "READY=1\nSTATUS=streaming %s on %s", pipeline->source_info().name.c_str(),
+			   config.output.socket.c_str());
+	};
 	// READY=1 waits for the first published frame: "started" means results flow, not that a socket exists.
 	sd_notifyf(0, "STATUS=starting: waiting for the first frame from %s", pipeline->source_info().name.c_str());
 	bool ready = false;
@@ -416,9 +423,7 @@ int run_daemon(const DaemonConfig &initial, const std::function<DaemonConfig()> 
 					last_sample = {0, 0, monotonic_ns()};
 					// Connected clients hear of the new source (its frames' seq start again) as a
 					// new client would.
-					const drivers::SourceInfo &info = pipeline->source_info();
-					server->publish(protocol::hello_message(
-						monotonic_ns(), info.name, info.geometry.width, info.geometry.height));
+					server->publish(hello_for(pipeline->source_info()));
 				}
 				std::string list;
 				for (const auto &option : changed)
@@ -429,8 +434,12 @@ int run_daemon(const DaemonConfig &initial, const std::function<DaemonConfig()> 
 				spdlog::error("reload refused, the running configuration stays: {}", e.what());
 			}
 		}
-		sd_notifyf(0, "READY=1\nSTATUS=streaming %s on %s", pipeline->source_info().name.c_str(),
-			   config.output.socket.c_str());
+		// Neither the new source nor the running configuration's could be opened again: nothing left to
+		// run (systemd's Restart=on-failure takes over).
+		if (!pipeline)
+			throw std::runtime_error("reload: no source could be opened, neither the new configuration's "
+						 "nor the running one's");
+		notify_ready();
 	};
 
 	for (;;) {
@@ -448,8 +457,7 @@ int run_daemon(const DaemonConfig &initial, const std::function<DaemonConfig()> 
 		if (!ready && snapshot.frames_published > 0) {
 			ready = true;
 			spdlog::info("first frame published: ready");
-			sd_notifyf(0, "READY=1\nSTATUS=streaming %s on %s", pipeline->source_info().name.c_str(),
-				   config.output.socket.c_str());
+			notify_ready();
 		}
 		if (watchdog) {
 			const WatchdogSample sample{snapshot.frames_captured, snapshot.frames_published,

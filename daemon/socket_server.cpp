@@ -328,11 +328,16 @@ void SocketServer::accept_clients()
 	}
 }
 
-void SocketServer::refuse(int fd, const char *why)
+void SocketServer::tell_and_close(int fd, const std::string &why)
 {
 	const std::string line = protocol::error_message(monotonic_ns(), why) + "\n";
 	(void)!::send(fd, line.data(), line.size(), MSG_DONTWAIT | MSG_NOSIGNAL);
 	::close(fd);
+}
+
+void SocketServer::refuse(int fd, const char *why)
+{
+	tell_and_close(fd, why);
 	++stats_.clients_refused;
 	++refusals_unlogged_;
 	const int64_t now = monotonic_ns();
@@ -364,13 +369,8 @@ bool SocketServer::admit(int fd)
 	} else {
 		cred.uid = static_cast<uid_t>(-1); // unknown peer: refused
 	}
-	const std::string line =
-		protocol::error_message(monotonic_ns(), "not allowed: uid " + std::to_string(cred.uid) +
-								" is not in output.allow_users or a group of "
-								"output.allow_groups") +
-		"\n";
-	(void)!::send(fd, line.data(), line.size(), MSG_DONTWAIT | MSG_NOSIGNAL);
-	::close(fd);
+	tell_and_close(fd, "not allowed: uid " + std::to_string(cred.uid) +
+				   " is not in output.allow_users or a group of output.allow_groups");
 	++stats_.clients_denied;
 	++denials_unlogged_;
 	const int64_t now = monotonic_ns();

@@ -92,6 +92,8 @@ private:
 	void accept_clients();
 	/// Accepts one pending connection only to tell it why it is refused, then closes it.
 	void refuse(int fd, const char *why);
+	/// Sends `why` as an `error` line (without waiting) and closes the connection.
+	static void tell_and_close(int fd, const std::string &why);
 	/// True when the peer on `fd` may read (options_.allow_uids / allow_gids); otherwise tells it, closes it,
 	/// counts it and returns false.
 	bool admit(int fd);

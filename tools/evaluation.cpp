@@ -154,14 +154,18 @@ DepthScore &DepthScore::operator+=(const DepthScore &other)
 	return *this;
 }
 
+double median(std::vector<double> values)
+{
+	if (values.empty())
+		return std::nan("");
+	const auto mid = values.begin() + static_cast<std::ptrdiff_t>(values.size() / 2);
+	std::nth_element(values.begin(), mid, values.end());
+	return *mid;
+}
+
 double DepthScore::median() const
 {
-	if (relative_errors.empty())
-		return 0;
-	std::vector<double> sorted = relative_errors;
-	const auto mid = sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2);
-	std::nth_element(sorted.begin(), mid, sorted.end());
-	return *mid;
+	return relative_errors.empty() ? 0 : tools::median(relative_errors);
 }
 
 double DepthScore::fraction_within(double relative) const

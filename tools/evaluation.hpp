@@ -37,6 +37,9 @@ struct LabelScore {
 /// edge are skipped (their label is ambiguous: the descriptor patch straddles mover and scene).
 LabelScore score_frame(const FrameResult &result, const cv::Mat &mask, int border_px = 0);
 
+/// The median (the upper one of an even count); NaN when empty.
+double median(std::vector<double> values);
+
 /// Labels of the points on each mover, by the mover's id in the mask (the sim writes ids 1..N): shows which
 /// mover a method misses (recall per mover = dynamic / (dynamic + static)).
 struct MoverCounts {

@@ -1,6 +1,7 @@
 #include "tools/group_eval.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <iomanip>
 #include <numbers>
@@ -10,23 +11,22 @@
 
 namespace stereod::tools {
 
-std::vector<TrueMover> visible_movers(const cv::Mat &mask, const std::string &truth_line, int min_pixels)
+std::vector<TrueMover> visible_movers(const cv::Mat &mask, const nlohmann::json &truth, int min_pixels)
 {
 	std::vector<TrueMover> movers;
 	if (mask.empty())
 		return movers;
-	std::map<int, std::pair<int, cv::Rect>> seen; // id -> pixels, box
+	std::array<int, 256> pixels{}; // per mask id
+	std::array<cv::Rect, 256> boxes{};
 	for (int y = 0; y < mask.rows; ++y) {
 		const auto *row = mask.ptr<uint8_t>(y);
 		for (int x = 0; x < mask.cols; ++x) {
 			if (row[x] == 0)
 				continue;
-			auto &[pixels, box] = seen[row[x]];
-			box = pixels == 0 ? cv::Rect(x, y, 1, 1) : box | cv::Rect(x, y, 1, 1);
-			++pixels;
+			boxes[row[x]] =
+				pixels[row[x]]++ == 0 ? cv::Rect(x, y, 1, 1) : boxes[row[x]] | cv::Rect(x, y, 1, 1);
 		}
 	}
-	const nlohmann::json truth = nlohmann::json::parse(truth_line);
 	cv::Matx33d r_wc = cv::Matx33d::eye();
 	if (truth.contains("camera_pose"))
 		for (int r = 0; r < 3; ++r)
@@ -34,13 +34,12 @@ std::vector<TrueMover> visible_movers(const cv::Mat &mask, const std::string &tr
 				r_wc(r, c) = truth["camera_pose"][static_cast<size_t>(r * 4 + c)].get<double>();
 	for (const auto &object : truth.value("objects", nlohmann::json::array())) {
 		const int id = object.at("id").get<int>();
-		const auto it = seen.find(id);
-		if (it == seen.end() || it->second.first < min_pixels)
+		if (id <= 0 || id > 255 || pixels[static_cast<size_t>(id)] < min_pixels)
 			continue;
 		TrueMover m;
 		m.id = id;
-		m.pixels = it->second.first;
-		m.box = it->second.second;
+		m.pixels = pixels[static_cast<size_t>(id)];
+		m.box = boxes[static_cast<size_t>(id)];
 		const auto p = object.at("position_m").get<std::array<double, 3>>();
 		const auto v = object.at("velocity_mps").get<std::array<double, 3>>();
 		m.position_m = {p[0], p[1], p[2]};
@@ -135,15 +134,6 @@ void GroupScore::add(const FrameResult &result, const cv::Mat &mask, const std::
 	}
 	for (size_t i = 0; i < gs.size(); ++i)
 		groups_on_movers += on[i] != 0 ? 1 : 0;
-}
-
-double median(std::vector<double> values)
-{
-	if (values.empty())
-		return std::nan("");
-	const auto mid = values.begin() + static_cast<std::ptrdiff_t>(values.size() / 2);
-	std::nth_element(values.begin(), mid, values.end());
-	return *mid;
 }
 
 double fraction_below(const std::vector<double> &values, double limit)

@@ -11,7 +11,10 @@
 
 #include <opencv2/core.hpp>
 
+#include <nlohmann/json_fwd.hpp>
+
 #include "core/result.hpp"
+#include "tools/evaluation.hpp"
 
 namespace stereod::tools {
 
@@ -25,8 +28,7 @@ struct TrueMover {
 };
 
 /// One truth.ndjson line's objects that show at least `min_pixels` pixels in `mask` (ids as in the mask).
-/// `truth_line` is the line's JSON text.
-std::vector<TrueMover> visible_movers(const cv::Mat &mask, const std::string &truth_line, int min_pixels);
+std::vector<TrueMover> visible_movers(const cv::Mat &mask, const nlohmann::json &truth, int min_pixels);
 
 /// For each group, the mover it covers: the mover id holding the most mask pixels inside the group's box,
 /// when that is at least `min_share` of the box; 0 when the box lies mostly on the static scene.
@@ -58,7 +60,7 @@ struct GroupScore {
 	int separation_margin_px = 8;
 };
 
-double median(std::vector<double> values);
+/// The share of `values` under `limit`; NaN when empty (the median is tools::median, evaluation.hpp).
 double fraction_below(const std::vector<double> &values, double limit);
 std::string group_score_table(const std::string &name, const GroupScore &score);
 

@@ -212,7 +212,7 @@ cv::Mat load_mask(const fs::path &dir, uint64_t seq)
 /// Moving-target groups against the truth's movers (tools/group_eval.hpp).
 int eval_groups(const std::string &results_path, const std::string &truth_dir, const std::string &name, bool json_out)
 {
-	std::map<uint64_t, std::string> truth_lines;
+	std::map<uint64_t, nlohmann::json> truth_lines;
 	{
 		std::ifstream in(fs::path(truth_dir) / "truth.ndjson");
 		if (!in) {
@@ -221,8 +221,11 @@ int eval_groups(const std::string &results_path, const std::string &truth_dir, c
 		}
 		std::string line;
 		while (std::getline(in, line))
-			if (!line.empty())
-				truth_lines[nlohmann::json::parse(line).at("seq").get<uint64_t>()] = line;
+			if (!line.empty()) {
+				nlohmann::json truth = nlohmann::json::parse(line);
+				const auto seq = truth.at("seq").get<uint64_t>();
+				truth_lines[seq] = std::move(truth);
+			}
 	}
 	tools::GroupScore score;
 	// A mover counts as in view from 400 pixels on (a person 20 x 20 px): smaller ones carry too few

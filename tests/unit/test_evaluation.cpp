@@ -152,6 +152,8 @@ TEST(Trajectory, TumAndKittiFilesRoundTripAndNameTheBadLine)
 }
 
 // ------------------------------------------------------------------------------------------- groups
+#include <nlohmann/json.hpp>
+
 #include "tools/group_eval.hpp"
 
 namespace {
@@ -182,7 +184,7 @@ TEST(GroupEvaluation, HandComputedFrames)
 				  R"({"id":1,"position_m":[-1,0,5],"velocity_mps":[1.5,0,0]},)"
 				  R"({"id":2,"position_m":[1,0,6],"velocity_mps":[0,0,1]},)"
 				  R"({"id":3,"position_m":[9,0,9],"velocity_mps":[0,0,1]}]})"; // id 3 is not in view
-	const auto movers = tools::visible_movers(mask, truth, 400);
+	const auto movers = tools::visible_movers(mask, nlohmann::json::parse(truth), 400);
 	ASSERT_EQ(movers.size(), 2U);
 	EXPECT_EQ(movers[0].box, cv::Rect(100, 50, 40, 100));
 	EXPECT_TRUE(tools::movers_separated(movers, 8));
