@@ -90,6 +90,8 @@ std::string frame_message(const FrameResult &result)
 		if (point.xyz_m)
 			p["xyz_m"] = {round_to((*point.xyz_m)[0], 0.001), round_to((*point.xyz_m)[1], 0.001),
 				      round_to((*point.xyz_m)[2], 0.001)};
+		if (point.in_person)
+			p["person"] = true;
 		points.push_back(std::move(p));
 	}
 	message["points"] = std::move(points);
@@ -154,9 +156,21 @@ std::string frame_message(const FrameResult &result)
 			g["speed_mps"] = round_to(*group.speed_mps, 0.001);
 		if (group.heading_rad)
 			g["heading_rad"] = round_to(*group.heading_rad, 0.001);
+		if (!group.class_name.empty())
+			g["class"] = group.class_name;
 		groups.push_back(std::move(g));
 	}
 	message["groups"] = std::move(groups);
+	if (!result.people.empty()) {
+		json people = json::array();
+		for (const auto &person : result.people)
+			people.push_back({{"box_px",
+					   {round_to(person.box_px[0], 0.1), round_to(person.box_px[1], 0.1),
+					    round_to(person.box_px[2], 0.1), round_to(person.box_px[3], 0.1)}},
+					  {"score", round_to(person.score, 0.01)},
+					  {"age_frames", person.age_frames}});
+		message["people"] = std::move(people);
+	}
 	return message.dump();
 }
 
@@ -188,6 +202,7 @@ FrameResult parse_frame_message(const json &message)
 		point.track = p.value("track", uint64_t{0});
 		if (p.contains("xyz_m"))
 			point.xyz_m = p.at("xyz_m").get<std::array<float, 3>>();
+		point.in_person = p.value("person", false);
 		result.points.push_back(point);
 	}
 	if (const auto &ego = message.at("ego"); !ego.is_null()) {
@@ -234,8 +249,17 @@ FrameResult parse_frame_message(const json &message)
 			group.speed_mps = g.at("speed_mps").get<double>();
 		if (g.contains("heading_rad"))
 			group.heading_rad = g.at("heading_rad").get<double>();
+		group.class_name = g.value("class", std::string());
 		result.groups.push_back(group);
 	}
+	if (message.contains("people"))
+		for (const auto &p : message.at("people")) {
+			PersonRegion person;
+			person.box_px = p.at("box_px").get<std::array<float, 4>>();
+			person.score = p.value("score", 0.0F);
+			person.age_frames = p.value("age_frames", 0);
+			result.people.push_back(person);
+		}
 	return result;
 }
 

@@ -27,6 +27,14 @@ struct LabelledPoint {
 	float prev_v = 0;
 	uint64_t track = 0; ///< the same number while the point is followed from frame to frame; 0 = unknown
 	std::optional<std::array<float, 3>> xyz_m; ///< left-camera coordinates, when depth is known
+	bool in_person = false; ///< lies in a region of the person prior (seed 001's dynamic category)
+};
+
+/// A region of the person prior (core/vision/person_prior.hpp): where the detector saw a person.
+struct PersonRegion {
+	std::array<float, 4> box_px{}; ///< u0, v0, u1, v1 in the left image
+	float score = 0;	       ///< the detector's margin when it was seen
+	int age_frames = 0;	       ///< frames since the detector saw it (0: this frame)
 };
 
 /// The camera's own motion. Monocular sources have the image homography of the static scene only; stereo
@@ -71,6 +79,9 @@ struct TargetGroup {
 	std::optional<std::array<double, 3>> world_velocity_mps;
 	std::optional<double> speed_mps;
 	std::optional<double> heading_rad;
+	/// With the person prior on: "person" when most of the group's points lie in a person region, else
+	/// "unknown"; empty (not sent) with the prior off.
+	std::string class_name;
 };
 
 struct StageTime {
@@ -93,6 +104,8 @@ struct FrameResult {
 	std::optional<EgoMotion> ego;
 	std::optional<StereoSummary> stereo;
 	std::vector<TargetGroup> groups;
+	/// The person prior's regions for this frame; empty when it is off (or saw nobody).
+	std::vector<PersonRegion> people;
 };
 
 } // namespace stereod

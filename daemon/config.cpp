@@ -648,6 +648,58 @@ const std::vector<Option> &options()
 			"labels: residual difference to the group's still counted as moving with it",
 			[](DaemonConfig &c) -> double & { return c.motion.groups.label_tolerance_px; }, 0, 1000));
 
+		// [prior]: seed 001's person prior (core/vision/person_prior.hpp)
+		o.push_back(boolean("prior", "enabled",
+				    "detect people (OpenCV's HOG): their points leave the motion fits",
+				    [](DaemonConfig &c) -> bool & { return c.motion.prior.enabled; }));
+		o.push_back(number(
+			"prior", "every_n_frames", "run the detector on every n-th frame, carry its boxes between",
+			[](DaemonConfig &c) -> int & { return c.motion.prior.every_n_frames; }, 1, 1000));
+		o.push_back(number(
+			"prior", "min_score", "SVM margin a detection needs (higher: fewer, surer people)",
+			[](DaemonConfig &c) -> double & { return c.motion.prior.min_score; }, -10, 100));
+		o.push_back(number(
+			"prior", "upscale", "detect on the image scaled by this (people under ~128 px tall need > 1)",
+			[](DaemonConfig &c) -> double & { return c.motion.prior.upscale; }, 0.25, 4));
+		o.push_back(number(
+			"prior", "margin", "grow each box by this fraction of its size on every side",
+			[](DaemonConfig &c) -> double & { return c.motion.prior.margin; }, 0, 1));
+		o.push_back(number(
+			"prior", "max_age_frames", "forget a carried box after this many frames without a detection",
+			[](DaemonConfig &c) -> int & { return c.motion.prior.max_age_frames; }, 1, 1000));
+		{
+			Option rule{"prior", "points",
+				    "points in a person box: weighted (memory gate memory_chi2) | judged | dynamic "
+				    "(seed 001)",
+				    nullptr, nullptr};
+			rule.set = [](const Value &v, DaemonConfig &c) {
+				const std::string name = v.is_string() ? std::string(v.as_string()) : std::string();
+				if (name == "judged")
+					c.motion.prior.rule = vision::PriorLabelRule::Judged;
+				else if (name == "weighted")
+					c.motion.prior.rule = vision::PriorLabelRule::Weighted;
+				else if (name == "dynamic")
+					c.motion.prior.rule = vision::PriorLabelRule::Dynamic;
+				else
+					throw std::invalid_argument("must be one of weighted, judged, dynamic");
+			};
+			rule.show = [](const DaemonConfig &c) {
+				switch (c.motion.prior.rule) {
+				case vision::PriorLabelRule::Judged:
+					return std::string("\"judged\"");
+				case vision::PriorLabelRule::Dynamic:
+					return std::string("\"dynamic\"");
+				case vision::PriorLabelRule::Weighted:
+					break;
+				}
+				return std::string("\"weighted\"");
+			};
+			o.push_back(std::move(rule));
+		}
+		o.push_back(number(
+			"prior", "memory_chi2", "weighted: the motion memory's gate for points in a person box",
+			[](DaemonConfig &c) -> double & { return c.motion.prior.memory_chi2; }, 0.01, 1000));
+
 		// [output]
 		o.push_back(text("output", "socket", "Unix socket path for clients",
 				 [](DaemonConfig &c) -> std::string & { return c.output.socket; }));

@@ -61,6 +61,37 @@ double LabelScore::mean_coverage() const
 	return frames == 0 ? 0.0 : mover_coverage_sum / static_cast<double>(frames);
 }
 
+PriorRegionScore &PriorRegionScore::operator+=(const PriorRegionScore &other)
+{
+	detected += other.detected;
+	detected_on_mover += other.detected_on_mover;
+	carried += other.carried;
+	carried_on_mover += other.carried_on_mover;
+	return *this;
+}
+
+PriorRegionScore score_prior_regions(const FrameResult &result, const cv::Mat &mask, double min_fraction)
+{
+	PriorRegionScore score;
+	const cv::Rect frame(0, 0, mask.cols, mask.rows);
+	for (const PersonRegion &region : result.people) {
+		const cv::Rect box =
+			cv::Rect(cv::Point(static_cast<int>(region.box_px[0]), static_cast<int>(region.box_px[1])),
+				 cv::Point(static_cast<int>(region.box_px[2]), static_cast<int>(region.box_px[3]))) &
+			frame;
+		const bool on_mover = box.area() > 0 && static_cast<double>(cv::countNonZero(mask(box))) >=
+								min_fraction * static_cast<double>(box.area());
+		if (region.age_frames == 0) {
+			++score.detected;
+			score.detected_on_mover += on_mover;
+		} else {
+			++score.carried;
+			score.carried_on_mover += on_mover;
+		}
+	}
+	return score;
+}
+
 LabelScore score_frame(const FrameResult &result, const cv::Mat &mask, int border_px)
 {
 	CV_Assert(mask.type() == CV_8UC1);

@@ -61,6 +61,17 @@ struct DepthScore {
 };
 DepthScore score_depth(const FrameResult &result, const cv::Mat &depth_mm);
 
+/// The person prior's regions against the movers: a region detected in this frame (age 0) is on a mover when
+/// at least `min_fraction` of its pixels are; carried regions are counted apart.
+struct PriorRegionScore {
+	uint64_t detected = 0;
+	uint64_t detected_on_mover = 0;
+	uint64_t carried = 0;
+	uint64_t carried_on_mover = 0;
+	PriorRegionScore &operator+=(const PriorRegionScore &other);
+};
+PriorRegionScore score_prior_regions(const FrameResult &result, const cv::Mat &mask, double min_fraction = 0.1);
+
 /// A table row: "name frames points P R F1 static-error uncertain coverage".
 std::string format_score_row(const std::string &name, const LabelScore &score);
 std::string score_table_header();

@@ -277,6 +277,7 @@ int eval(const std::string &results_path, const std::string &truth_dir, const st
 	const auto results = tools::read_results(results_path);
 	tools::LabelScore all, covered;
 	tools::DepthScore depth;
+	tools::PriorRegionScore regions;
 	std::map<int, tools::MoverCounts> movers;
 	uint64_t missing = 0;
 	std::ofstream csv;
@@ -299,6 +300,7 @@ int eval(const std::string &results_path, const std::string &truth_dir, const st
 			depth += tools::score_depth(result, cv::imread(depth_file.string(), cv::IMREAD_ANYDEPTH));
 		if (per_mover)
 			tools::count_per_mover(result, mask, movers);
+		regions += tools::score_prior_regions(result, mask);
 		all += score;
 		if (score.mean_coverage() >= min_coverage)
 			covered += score;
@@ -362,6 +364,10 @@ int eval(const std::string &results_path, const std::string &truth_dir, const st
 			  << 100 * depth.median() << "%, within 1%: " << std::setprecision(1)
 			  << 100 * depth.fraction_within(0.01) << "%, within 5%: " << 100 * depth.fraction_within(0.05)
 			  << "%\n";
+	if (regions.detected + regions.carried > 0)
+		std::cout << "\nperson prior: " << regions.detected_on_mover << " of " << regions.detected
+			  << " detected regions on a mover (>= 10% of the box), " << regions.carried_on_mover << " of "
+			  << regions.carried << " carried ones\n";
 	if (missing)
 		std::cerr << "stereoctl eval: " << missing << " frames had no mask\n";
 	return 0;
@@ -630,6 +636,7 @@ int main(int argc, char **argv)
 	tools::add_devices_command(app);
 	tools::add_export_command(app);
 	tools::add_map_command(app);
+	tools::add_reference_command(app);
 	tools::add_calibrate_command(app);
 
 	try {

@@ -17,6 +17,8 @@ void add_calibrate_command(CLI::App &app);
 void add_export_command(CLI::App &app);
 /// `stereoctl map`: the static scene, movers left out, as a PLY point cloud (issue 15's static map).
 void add_map_command(CLI::App &app);
+/// `stereoctl reference`: moving-pixel masks for footage from a still camera (a truth folder for eval).
+void add_reference_command(CLI::App &app);
 
 /// `stereoctl eval --poses`: the estimated trajectory against TUM or KITTI ground truth (ATE, RPE, drift).
 struct TrajectoryEvalOptions {

@@ -8,6 +8,7 @@
 #include <opencv2/core.hpp>
 
 #include "core/result.hpp"
+#include "core/vision/person_prior.hpp"
 #include "core/vision/surf.hpp"
 
 namespace stereod::vision {
@@ -37,6 +38,8 @@ struct FrameFeatures {
 	std::optional<StereoSummary> stereo; ///< how the stereo matching went, when it ran
 	/// The left image in grey (owned, not a pool buffer), for sub-pixel refinement of the temporal matches.
 	cv::Mat grey;
+	/// The person prior's detections in this frame; nothing when the detector did not run on it.
+	std::optional<std::vector<PriorRegion>> people;
 };
 
 /// Mean colour (B,G,R; grey images repeat the one channel) of the patch around `at`, clamped to the image.

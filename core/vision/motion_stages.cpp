@@ -1,5 +1,6 @@
 #include "core/vision/motion_stages.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 
@@ -64,6 +65,15 @@ PointLabel combine(LabelMethod method, PointLabel seed, const GeometricTest &tes
 	if (seed == PointLabel::Static && !test.moving)
 		return PointLabel::Static;
 	return PointLabel::Uncertain;
+}
+
+/// The prior's regions as the frame message carries them.
+void publish_people(std::span<const PriorRegion> regions, FrameResult &result)
+{
+	result.people.clear();
+	for (const PriorRegion &r : regions)
+		result.people.push_back(
+			{{r.box.x, r.box.y, r.box.x + r.box.width, r.box.y + r.box.height}, r.score, r.age_frames});
 }
 
 void fill_pose(EgoMotion &ego, const geometry::Pose *prev_from_curr, const geometry::Pose &world_from_curr)
@@ -134,6 +144,11 @@ FrameFeatures extract_stage(const StereoFrame &frame, const MotionParams &params
 			// A grey frame's image is a pool buffer that the next capture overwrites: keep a copy.
 			features.grey = grey.data == frame.left.data ? grey.clone() : grey;
 	}
+	if (params.prior.enabled &&
+	    frame.sequence % static_cast<uint64_t>(std::max(params.prior.every_n_frames, 1)) == 0) {
+		StageTimer timer(timing, "prior");
+		features.people = detect_people(grey, params.prior);
+	}
 	if (!params.rig)
 		return features;
 	// A source with both eyes is measured by stereo even when it also has a depth image (the sim's depth
@@ -169,6 +184,10 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 	if (prev == nullptr || (metric && (prev_tracks == nullptr || !prev_tracks->world_from_camera))) {
 		// The first frame (or the memory was lost): with depth, this camera is the world's origin.
 		TrackSet tracks = follow_tracks(nullptr, follow, params.classifier, params.temporal);
+		if (params.prior.enabled && cur.people) {
+			tracks.people = *cur.people;
+			publish_people(tracks.people, result);
+		}
 		if (metric) {
 			tracks.world_from_camera = geometry::Pose{};
 			EgoMotion ego;
@@ -207,14 +226,36 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 		for (size_t i = 0; i < n; ++i)
 			pairs[i].cur = to[i];
 	}
+	// The person prior's regions in this frame: detected here, or the last detection's carried along by
+	// the motion of the points inside them.
+	std::vector<PriorRegion> people;
+	std::vector<uint8_t> in_person(n, 0);
+	if (params.prior.enabled) {
+		if (cur.people) {
+			people = *cur.people;
+		} else if (prev_tracks != nullptr) {
+			std::vector<cv::Point2f> from(n), to(n);
+			for (size_t i = 0; i < n; ++i) {
+				from[i] = pairs[i].prev;
+				to[i] = pairs[i].cur;
+			}
+			people = carry_regions(prev_tracks->people, from, to, params.prior.max_age_frames);
+		}
+		std::vector<cv::Point2f> at(n);
+		for (size_t i = 0; i < n; ++i)
+			at[i] = pairs[i].cur;
+		in_person = in_dynamic_category(at, people);
+	}
 	StageTimer timer(result.timing, "classify");
-	std::vector<uint8_t> known_moving(n, 0);
+	// Points that take no part in the motion fits: those the motion memory knows move, and (seed 001) those
+	// in the prior's dynamic category. Their labels are still decided by the tests.
+	std::vector<uint8_t> known_moving = in_person;
 	if (prev_tracks != nullptr) {
 		for (size_t i = 0; i < n; ++i) {
 			const auto p = static_cast<size_t>(matches[i].prev);
-			known_moving[i] =
-				p < prev_tracks->by_keypoint.size() &&
-				memory_says_moving(prev_tracks->by_keypoint[p], params.classifier, params.temporal);
+			if (p < prev_tracks->by_keypoint.size() &&
+			    memory_says_moving(prev_tracks->by_keypoint[p], params.classifier, params.temporal))
+				known_moving[i] = 1;
 		}
 	}
 	Classification classification = classify(pairs, frame.left, params.classifier, known_moving);
@@ -291,6 +332,11 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 		}
 	}
 
+	if (params.prior.rule == PriorLabelRule::Dynamic)
+		for (size_t i = 0; i < n; ++i)
+			if (in_person[i] != 0)
+				classification.labels[i] = PointLabel::Dynamic;
+
 	follow.matches = matches;
 	follow.pairs = pairs;
 	follow.homography = classification.homography ? &*classification.homography : nullptr;
@@ -300,6 +346,17 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 		follow.predicted = predicted;
 	TrackSet tracks = follow_tracks(prev_tracks, follow, params.classifier, params.temporal);
 	promote_remembered_movers(classification.labels, matches, tracks, params.classifier, params.temporal);
+	if (params.prior.enabled && params.prior.rule == PriorLabelRule::Weighted) {
+		TemporalParams weighted = params.temporal;
+		weighted.chi2 = params.prior.memory_chi2;
+		for (size_t i = 0; i < n; ++i) {
+			const auto c = static_cast<size_t>(matches[i].cur);
+			if (in_person[i] != 0 && classification.labels[i] == PointLabel::Static &&
+			    c < tracks.by_keypoint.size() &&
+			    memory_says_moving(tracks.by_keypoint[c], params.classifier, weighted))
+				classification.labels[i] = PointLabel::Dynamic;
+		}
+	}
 	// The camera in the world: chained on from the previous frame, or carried over when no pose was found.
 	const geometry::Pose world_prev = prev_tracks != nullptr && prev_tracks->world_from_camera
 						  ? *prev_tracks->world_from_camera
@@ -359,7 +416,23 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 		group_of_point = std::move(found.group_of_point);
 		tracks.groups = std::move(found.memory);
 		result.groups = std::move(found.groups);
+		if (params.prior.enabled) {
+			// A group is a person when most of its points lie in the prior's person regions.
+			std::vector<int> members(result.groups.size(), 0), on_person(result.groups.size(), 0);
+			for (size_t i = 0; i < n; ++i) {
+				const int g = group_of_point[i];
+				if (g < 0 || static_cast<size_t>(g) >= result.groups.size())
+					continue;
+				++members[static_cast<size_t>(g)];
+				on_person[static_cast<size_t>(g)] += in_person[i];
+			}
+			for (size_t g = 0; g < result.groups.size(); ++g)
+				result.groups[g].class_name =
+					members[g] > 0 && 2 * on_person[g] > members[g] ? "person" : "unknown";
+		}
 	}
+	tracks.people = std::move(people);
+	publish_people(tracks.people, result);
 	tracks.dynamic_by_keypoint.assign(cur.keypoints.size(), 0);
 	for (size_t i = 0; i < n; ++i)
 		if (classification.labels[i] == PointLabel::Dynamic || (i < failed.size() && failed[i] != 0))
@@ -378,6 +451,7 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 			point.label = PointLabel::Dynamic;
 		const auto c = static_cast<size_t>(matches[i].cur);
 		point.track = tracks.by_keypoint[c].id;
+		point.in_person = in_person[i] != 0;
 		if (c < cur.xyz.size() && std::isfinite(cur.xyz[c][2]))
 			point.xyz_m = std::array<float, 3>{cur.xyz[c][0], cur.xyz[c][1], cur.xyz[c][2]};
 		result.points.push_back(point);

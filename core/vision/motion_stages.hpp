@@ -37,6 +37,7 @@ struct MotionParams {
 	EgoParams ego;
 	LabelMethod label_method = LabelMethod::Combined;
 	GroupParams groups;
+	PersonPriorParams prior;
 	/// The source's rectified calibration; without it there is no depth and no metric pose.
 	std::optional<geometry::StereoRig> rig;
 };

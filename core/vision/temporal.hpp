@@ -30,6 +30,7 @@
 #include "core/vision/classifier.hpp"
 #include "core/vision/groups.hpp"
 #include "core/vision/matching.hpp"
+#include "core/vision/person_prior.hpp"
 
 namespace stereod::vision {
 
@@ -72,6 +73,8 @@ struct TrackSet {
 	std::vector<uint8_t> dynamic_by_keypoint;
 	/// Moving-target groups followed so far (core/vision/groups.hpp).
 	GroupMemory groups;
+	/// The person prior's regions in this frame (detected here, or carried from the last detection).
+	std::vector<PriorRegion> people;
 };
 
 /// What follow_tracks() needs to know about one match: which keypoints it joins, both ends, and the colours.

@@ -1,6 +1,9 @@
 #include <gtest/gtest.h>
 
+#include <opencv2/imgproc.hpp>
+
 #include "tools/evaluation.hpp"
+#include "tools/motion_reference.hpp"
 
 using namespace stereod;
 using namespace stereod::tools;
@@ -216,4 +219,32 @@ TEST(GroupEvaluation, HandComputedFrames)
 	EXPECT_NEAR(score.heading_error_deg[0], 10.0, 1e-4);
 	EXPECT_NEAR(score.centroid_error_m[0], 0.3, 1e-6);
 	EXPECT_NEAR(tools::fraction_below(score.heading_error_deg, 15), 1.0, 1e-12);
+}
+
+// The still-camera reference (tools/motion_reference.hpp): the median of samples is the empty scene even
+// when a mover crosses some of them, and a mover's blob is found, noise is not.
+TEST(MotionReference, MedianIgnoresAMoverAndTheMaskFindsIt)
+{
+	const cv::Mat scene(60, 80, CV_8UC3, cv::Scalar(100, 120, 140));
+	std::vector<cv::Mat> samples;
+	for (int k = 0; k < 7; ++k) {
+		cv::Mat s = scene.clone();
+		if (k < 3) // a dark mover in 3 of 7 samples, at a different place each time
+			cv::rectangle(s, cv::Rect(5 + 20 * k, 10, 15, 30), cv::Scalar(10, 10, 10), cv::FILLED);
+		samples.push_back(s);
+	}
+	const cv::Mat background = tools::median_background(samples);
+	EXPECT_EQ(cv::norm(background, scene, cv::NORM_INF), 0);
+
+	cv::Mat frame = scene.clone();
+	cv::rectangle(frame, cv::Rect(30, 15, 16, 30), cv::Scalar(20, 200, 20), cv::FILLED); // a mover: 480 px
+	frame.at<cv::Vec3b>(5, 5) = cv::Vec3b(255, 255, 255);				     // one noisy pixel
+	tools::MotionReferenceParams params;
+	params.dilate_radius_px = 0;
+	const cv::Mat mask = tools::mover_mask(frame, background, params);
+	EXPECT_EQ(mask.at<uint8_t>(30, 38), 1);
+	EXPECT_EQ(mask.at<uint8_t>(5, 5), 0);
+	EXPECT_NEAR(cv::countNonZero(mask), 16 * 30, 4); // the opening (a 3 x 3 cross) rounds the 4 corners
+	params.min_area_px = 1000;			 // larger than the mover: nothing kept
+	EXPECT_EQ(cv::countNonZero(tools::mover_mask(frame, background, params)), 0);
 }

@@ -134,6 +134,31 @@ TEST(Protocol, GroupsRoundTripWithDepthFieldsOnlyWhereMeasured)
 	EXPECT_DOUBLE_EQ(*back.groups[1].heading_rad, -1.571);
 }
 
+TEST(Protocol, PersonPriorFieldsRoundTripAndAreAbsentWhenOff)
+{
+	FrameResult off;
+	off.points.push_back(LabelledPoint{});
+	off.groups.push_back(TargetGroup{});
+	const auto plain = nlohmann::json::parse(protocol::frame_message(off));
+	EXPECT_FALSE(plain.contains("people"));
+	EXPECT_FALSE(plain.at("points")[0].contains("person"));
+	EXPECT_FALSE(plain.at("groups")[0].contains("class"));
+
+	FrameResult on = off;
+	on.points[0].in_person = true;
+	on.groups[0].class_name = "person";
+	on.people.push_back({{10, 20.25F, 74, 148}, 2.345F, 3});
+	const auto json = nlohmann::json::parse(protocol::frame_message(on));
+	EXPECT_EQ(json.at("people")[0].at("age_frames"), 3);
+	const FrameResult back = protocol::parse_frame_message(json);
+	ASSERT_EQ(back.people.size(), 1U);
+	EXPECT_FLOAT_EQ(back.people[0].box_px[1], 20.3F); // rounded to 0.1 px
+	EXPECT_FLOAT_EQ(back.people[0].score, 2.35F);
+	EXPECT_EQ(back.people[0].age_frames, 3);
+	EXPECT_TRUE(back.points[0].in_person);
+	EXPECT_EQ(back.groups[0].class_name, "person");
+}
+
 TEST(Protocol, RejectsOtherVersions)
 {
 	auto j = nlohmann::json::parse(protocol::frame_message(FrameResult{}));
