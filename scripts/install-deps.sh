@@ -27,8 +27,9 @@ packages=(
 if $test_beds; then
   # camera test beds: fake GigE cameras in a private network namespace; V4L2 drivers in a QEMU-booted kernel
   packages+=(aravis-tools aravis-tools-cli iproute2 util-linux qemu-system-x86 busybox-static cpio kmod v4l-utils)
-  # the service's unit checks (systemd-analyze verify / security)
-  packages+=(systemd)
+  # the service's unit checks (systemd-analyze verify / security), and real systemd booting a fresh bookworm
+  # root with the package installed (tests/systemd: debootstrap, systemd-nspawn)
+  packages+=(systemd debootstrap systemd-container)
 fi
 
 missing=()
