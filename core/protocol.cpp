@@ -120,6 +120,10 @@ std::string frame_message(const FrameResult &result)
 			if (!*ego.valid)
 				e["reason"] = ego.reason;
 		}
+		if (ego.keyframe)
+			e["keyframe"] = *ego.keyframe;
+		if (ego.covisibility)
+			e["covisibility"] = round_to(*ego.covisibility, 0.001);
 		message["ego"] = std::move(e);
 	} else {
 		message["ego"] = nullptr;
@@ -221,6 +225,10 @@ FrameResult parse_frame_message(const json &message)
 				if (ego.contains(key) && !ego.at(key).is_null())
 					*field = ego.at(key).get<std::array<double, 16>>();
 		}
+		if (ego.contains("keyframe"))
+			e.keyframe = ego.at("keyframe").get<bool>();
+		if (ego.contains("covisibility"))
+			e.covisibility = ego.at("covisibility").get<double>();
 		result.ego = e;
 	}
 	if (message.contains("stereo")) {

@@ -52,6 +52,10 @@ struct EgoMotion {
 	std::string reason;
 	std::optional<std::array<double, 16>> t_prev_curr;  ///< previous camera from current, row-major 4x4
 	std::optional<std::array<double, 16>> t_world_curr; ///< world (the first frame's camera) from current
+	/// Stereo/RGB-D: whether this frame is a keyframe (seed 001 eqs. 6-7), and its static co-visibility index
+	/// with the last keyframe (eq. 7).
+	std::optional<bool> keyframe;
+	std::optional<double> covisibility;
 };
 
 /// Sparse stereo of one frame, and the calibration's health as the matches show it.

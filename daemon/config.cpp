@@ -700,6 +700,23 @@ const std::vector<Option> &options()
 			"prior", "memory_chi2", "weighted: the motion memory's gate for points in a person box",
 			[](DaemonConfig &c) -> double & { return c.motion.prior.memory_chi2; }, 0.01, 1000));
 
+		// [keyframes]: seed 001's keyframe selection, eqs. 6-7 (core/vision/keyframes.hpp)
+		o.push_back(boolean("keyframes", "enabled", "mark keyframes (stereo/RGB-D: needs the metric pose)",
+				    [](DaemonConfig &c) -> bool & { return c.motion.keyframes.enabled; }));
+		o.push_back(number(
+			"keyframes", "min_translation_m", "eq. 6: the camera moved this far since the last keyframe...",
+			[](DaemonConfig &c) -> double & { return c.motion.keyframes.min_translation_m; }, 0, 1000));
+		o.push_back(number(
+			"keyframes", "min_rotation_deg", "eq. 6: ...or turned this much",
+			[](DaemonConfig &c) -> double & { return c.motion.keyframes.min_rotation_deg; }, 0, 180));
+		o.push_back(number(
+			"keyframes", "max_covisibility",
+			"eq. 7: and shares less than this fraction of its static points",
+			[](DaemonConfig &c) -> double & { return c.motion.keyframes.max_covisibility; }, 0, 1));
+		o.push_back(number(
+			"keyframes", "min_new_points", "and sees at least this many static points the last one did not",
+			[](DaemonConfig &c) -> int & { return c.motion.keyframes.min_new_points; }, 0, 100000));
+
 		// [output]
 		o.push_back(text("output", "socket", "Unix socket path for clients",
 				 [](DaemonConfig &c) -> std::string & { return c.output.socket; }));

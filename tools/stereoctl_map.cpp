@@ -18,6 +18,7 @@ namespace {
 struct MapOptions {
 	std::string results, output;
 	bool colour = false;
+	bool keyframes_only = false;
 	SourceOptions source;
 	geometry::StaticMapParams params;
 };
@@ -44,10 +45,15 @@ int make_map(const MapOptions &options)
 	const auto results = read_results(options.results);
 	geometry::StaticMap map(options.params);
 	uint64_t frames = 0, added = 0;
+	// Seed 001 builds its map from keyframes: with --keyframes only frames marked `ego.keyframe` add points.
+	const auto wanted = [&options](const FrameResult &result) {
+		return !options.keyframes_only || (result.ego && result.ego->keyframe && *result.ego->keyframe);
+	};
 	if (!options.colour) {
 		for (const auto &[seq, result] : results) {
 			++frames;
-			added += static_cast<uint64_t>(map.add(result));
+			if (wanted(result))
+				added += static_cast<uint64_t>(map.add(result));
 		}
 	} else {
 		auto source = open_source(options.source);
@@ -59,7 +65,8 @@ int make_map(const MapOptions &options)
 			if (it == results.end())
 				continue;
 			++frames;
-			added += static_cast<uint64_t>(map.add(it->second, frame.left));
+			if (wanted(it->second))
+				added += static_cast<uint64_t>(map.add(it->second, frame.left));
 		}
 	}
 	const auto points = map.points();
@@ -80,6 +87,8 @@ void add_map_command(CLI::App &app)
 	cmd->add_option("-r,--results", options->results, "NDJSON from stereod process (stereo or RGB-D)")->required();
 	cmd->add_flag("--colour", options->colour,
 		      "colour the points from the source the results came from (--input, --format, --set)");
+	cmd->add_flag("--keyframes", options->keyframes_only,
+		      "only keyframes add points (ego.keyframe; seed 001 builds its map from them)");
 	cmd->add_option("-c,--config", options->source.config_path, "stereod config file (for --colour)");
 	cmd->add_option("-s,--set", options->source.overrides, "override: section.key=value (for --colour)")
 		->allow_extra_args(false);

@@ -76,6 +76,16 @@ void publish_people(std::span<const PriorRegion> regions, FrameResult &result)
 			{{r.box.x, r.box.y, r.box.x + r.box.width, r.box.y + r.box.height}, r.score, r.age_frames});
 }
 
+/// A frame's static points with depth, for the keyframe selection.
+std::vector<StaticObservation> static_observations(std::span<const LabelledPoint> points)
+{
+	std::vector<StaticObservation> observed;
+	for (const LabelledPoint &p : points)
+		if (p.label == PointLabel::Static && p.xyz_m)
+			observed.push_back({{p.u, p.v}, {(*p.xyz_m)[0], (*p.xyz_m)[1], (*p.xyz_m)[2]}});
+	return observed;
+}
+
 void fill_pose(EgoMotion &ego, const geometry::Pose *prev_from_curr, const geometry::Pose &world_from_curr)
 {
 	if (prev_from_curr != nullptr)
@@ -194,6 +204,10 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 			ego.valid = false;
 			ego.reason = "first frame: the world's origin";
 			fill_pose(ego, nullptr, *tracks.world_from_camera);
+			if (params.keyframes.enabled) {
+				ego.keyframe = true; // the world's origin is the first keyframe
+				tracks.last_keyframe = Keyframe{frame.sequence, geometry::Pose{}, {}};
+			}
 			result.ego = ego;
 		}
 		return tracks;
@@ -479,6 +493,20 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 			ego.reason = pose ? pose->reason : "the previous frame has no depth";
 		}
 		fill_pose(ego, moved ? &prev_from_curr : nullptr, world_from_curr);
+		if (params.keyframes.enabled) {
+			tracks.last_keyframe = prev_tracks->last_keyframe;
+			ego.keyframe = false;
+			if (moved && tracks.last_keyframe) {
+				const std::vector<StaticObservation> observed = static_observations(result.points);
+				const KeyframeDecision decision =
+					decide_keyframe(*tracks.last_keyframe, world_from_curr, observed, *params.rig,
+							params.keyframes);
+				ego.covisibility = decision.covisibility;
+				ego.keyframe = decision.keyframe;
+				if (decision.keyframe)
+					tracks.last_keyframe = make_keyframe(frame.sequence, world_from_curr, observed);
+			}
+		}
 	}
 	if (classification.homography || metric)
 		result.ego = ego;

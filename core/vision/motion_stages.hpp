@@ -19,6 +19,7 @@
 #include "core/vision/classifier.hpp"
 #include "core/vision/ego.hpp"
 #include "core/vision/features.hpp"
+#include "core/vision/keyframes.hpp"
 #include "core/vision/matching.hpp"
 #include "core/vision/stereo.hpp"
 #include "core/vision/temporal.hpp"
@@ -38,6 +39,7 @@ struct MotionParams {
 	LabelMethod label_method = LabelMethod::Combined;
 	GroupParams groups;
 	PersonPriorParams prior;
+	KeyframeParams keyframes;
 	/// The source's rectified calibration; without it there is no depth and no metric pose.
 	std::optional<geometry::StereoRig> rig;
 };

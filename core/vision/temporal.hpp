@@ -29,6 +29,7 @@
 #include "core/result.hpp"
 #include "core/vision/classifier.hpp"
 #include "core/vision/groups.hpp"
+#include "core/vision/keyframes.hpp"
 #include "core/vision/matching.hpp"
 #include "core/vision/person_prior.hpp"
 
@@ -75,6 +76,8 @@ struct TrackSet {
 	GroupMemory groups;
 	/// The person prior's regions in this frame (detected here, or carried from the last detection).
 	std::vector<PriorRegion> people;
+	/// Stereo/RGB-D: the last keyframe (core/vision/keyframes.hpp).
+	std::optional<Keyframe> last_keyframe;
 };
 
 /// What follow_tracks() needs to know about one match: which keypoints it joins, both ends, and the colours.
