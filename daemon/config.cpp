@@ -540,6 +540,10 @@ const std::vector<Option> &options()
 			"ego", "ransac_iterations", "P3P samples drawn per frame (up to four hypotheses each)",
 			[](DaemonConfig &c) -> int & { return c.motion.ego.ransac_iterations; }, 1, 100000));
 		o.push_back(number(
+			"ego", "ransac_confidence",
+			"stop sampling once an all-inlier sample was drawn with this probability (0: draw them all)",
+			[](DaemonConfig &c) -> double & { return c.motion.ego.ransac_confidence; }, 0, 0.999999));
+		o.push_back(number(
 			"ego", "max_depth_m", "farther points do not vote for the pose",
 			[](DaemonConfig &c) -> double & { return c.motion.ego.max_depth_m; }, 0.1, 100000));
 		o.push_back(number(

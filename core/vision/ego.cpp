@@ -1,5 +1,6 @@
 #include "core/vision/ego.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <numbers>
@@ -166,7 +167,25 @@ PoseEstimate estimate_pose(std::span<const cv::Vec3f> prev_xyz, std::span<const 
 	std::vector<int> inliers;
 	size_t best_support = 0;
 	geometry::Pose best;
-	for (int iteration = 0; iteration < params.ransac_iterations; ++iteration) {
+	// Samples needed: with a fraction w of inliers, one sample of 3 is all inliers with probability w^3, so
+	// log(1 - confidence) / log(1 - w^3) samples find one with the wanted confidence. At least a few are drawn
+	// so that a lucky first hypothesis on a mover does not end the search.
+	constexpr int kMinSamples = 12;
+	int needed = params.ransac_iterations;
+	const auto samples_for = [&](size_t support) {
+		const double w = static_cast<double>(support) / static_cast<double>(object.size());
+		const double miss = 1.0 - w * w * w;
+		if (params.ransac_confidence <= 0 || params.ransac_confidence >= 1)
+			return params.ransac_iterations;
+		if (miss <= 1e-12)
+			return std::min(kMinSamples, params.ransac_iterations);
+		const double samples = std::ceil(std::log(1.0 - params.ransac_confidence) / std::log(miss));
+		return static_cast<int>(std::clamp(samples,
+						   static_cast<double>(std::min(kMinSamples, params.ransac_iterations)),
+						   static_cast<double>(params.ransac_iterations)));
+	};
+	for (int iteration = 0; iteration < needed; ++iteration) {
+		out.samples = iteration + 1;
 		std::array<size_t, 3> sample{};
 		sample[0] = pick(rng);
 		do
@@ -194,6 +213,7 @@ PoseEstimate estimate_pose(std::span<const cv::Vec3f> prev_xyz, std::span<const 
 			if (support > best_support) {
 				best_support = support;
 				best = hypothesis;
+				needed = samples_for(support);
 			}
 		}
 	}

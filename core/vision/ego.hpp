@@ -30,13 +30,16 @@ namespace stereod::vision {
 struct EgoParams {
 	bool enabled = true;		  ///< estimate the pose when the source is stereo (or RGB-D) and calibrated
 	double ransac_threshold_px = 2.0; ///< PnP RANSAC inlier distance
-	int ransac_iterations = 200;	  ///< P3P samples (up to four hypotheses each)
-	int min_inliers = 15;		  ///< fewer: the pose is not trusted (ego.valid = false)
-	double max_depth_m = 60;	  ///< farther points carry no translation; they still vote for rotation
-	double pixel_sigma_px = 1.0;	  ///< feature position noise for the geometric test
-	double chi2_quantile = 0.99;	  ///< the geometric test's false-alarm rate is 1 - this
-	bool along_line = true;		  ///< include the along-the-epipolar-line term (seed 001 has d1 and d2 only)
-	bool depth_check = true;	  ///< include eq. 4's depth term d2 (needs depth at frame n)
+	int ransac_iterations = 200;	  ///< P3P samples at most (up to four hypotheses each)
+	/// Stop sampling once a sample of all inliers has been drawn with this probability, given the best inlier
+	/// fraction so far (the usual adaptive RANSAC bound); 0 draws all `ransac_iterations`.
+	double ransac_confidence = 0.999;
+	int min_inliers = 15;	     ///< fewer: the pose is not trusted (ego.valid = false)
+	double max_depth_m = 60;     ///< farther points carry no translation; they still vote for rotation
+	double pixel_sigma_px = 1.0; ///< feature position noise for the geometric test
+	double chi2_quantile = 0.99; ///< the geometric test's false-alarm rate is 1 - this
+	bool along_line = true;	     ///< include the along-the-epipolar-line term (seed 001 has d1 and d2 only)
+	bool depth_check = true;     ///< include eq. 4's depth term d2 (needs depth at frame n)
 	/// A point is labelled dynamic only when the test fails in this many consecutive frames of its track
 	/// (until then it is uncertain): a one-frame failure is usually a mismatch or a stereo error at an
 	/// occlusion edge, a mover keeps failing. 1 = every frame alone, as the seed.
@@ -80,6 +83,7 @@ struct PoseEstimate {
 	std::vector<uint8_t> inlier_mask; ///< per input point
 	double rms_px = 0;		  ///< re-projection RMS over the inliers
 	bool prior_used = false;	  ///< the candidates were gated by the motion prior
+	int samples = 0;		  ///< RANSAC samples drawn (EgoParams::ransac_confidence ends it early)
 };
 
 /// `prev_xyz` (frame n-1's camera, NaN = no depth) and `cur_px` are index-aligned; `votes[i] == 0` keeps a

@@ -168,6 +168,17 @@ TEST(Geometry, PnpRecoversAKnownPoseDespiteOutliers)
 	EXPECT_LT((e.curr_from_prev.inverse() * truth).angle(), 1e-5);
 	for (size_t i = 0; i < xyz.size(); i += 4)
 		EXPECT_EQ(e.inlier_mask[i], 0) << "the mover's point " << i << " voted";
+	// Adaptive RANSAC: with 3/4 inliers a sample is all inliers with probability 0.42, so 0.999 confidence
+	// needs log(0.001) / log(0.58) = 12.7 -> 13 samples once the best hypothesis is found (it may take a few
+	// more to find it); drawing all 200 gives the same pose.
+	EXPECT_GE(e.samples, 12);
+	EXPECT_LE(e.samples, 40);
+	EgoParams exhaustive;
+	exhaustive.ransac_confidence = 0;
+	const PoseEstimate all = estimate_pose(xyz, px, votes, kRig, exhaustive);
+	EXPECT_EQ(all.samples, 200);
+	EXPECT_EQ(all.inliers, e.inliers);
+	EXPECT_LT(cv::norm(all.curr_from_prev.t - e.curr_from_prev.t), 1e-6);
 
 	// Too few points with depth: not valid, and why.
 	const PoseEstimate few = estimate_pose(std::span(xyz).first(5), std::span(px).first(5), votes, kRig, {});
