@@ -271,6 +271,24 @@ Index euroc(const std::string &sequence_dir)
 	return index;
 }
 
+StereoCalibration tum_intrinsics(const std::string &sequence_name, std::vector<std::string> &notes)
+{
+	// TUM's published intrinsics (cvg.cit.tum.de, "file formats": intrinsic camera calibration). Freiburg 3's
+	// images are already undistorted, so its own calibration applies; for Freiburg 1 and 2 TUM recommends
+	// ROS's default set without undistortion, as the depth images are registered to the distorted colour
+	// images. The depth noise model takes the Kinect's projector-to-camera baseline, 7.5 cm, as a stereo
+	// rig's (geometry::StereoRig::depth_sigma).
+	constexpr double kKinectBaselineM = 0.075;
+	if (sequence_name.find("freiburg3") != std::string::npos)
+		return {535.4, 539.2, 320.1, 247.6, kKinectBaselineM};
+	if (sequence_name.find("freiburg1") == std::string::npos &&
+	    sequence_name.find("freiburg2") == std::string::npos)
+		notes.push_back(
+			"tum: '" + sequence_name +
+			"' names no Freiburg camera: ROS's default intrinsics (525, 525, 319.5, 239.5) assumed");
+	return {525.0, 525.0, 319.5, 239.5, kKinectBaselineM};
+}
+
 Index tum(const std::string &sequence_dir, double max_difference_s)
 {
 	const fs::path root(sequence_dir);
@@ -284,6 +302,9 @@ Index tum(const std::string &sequence_dir, double max_difference_s)
 				      " rgb frames have no depth frame within the time limit and were skipped");
 	for (const auto &[i, j] : pairs)
 		index.entries.push_back({rgb[i].t_ns, 0, rgb[i].file, {}, depth[j].file});
+	index.calibration = tum_intrinsics(root.filename().empty() ? root.parent_path().filename().string()
+								   : root.filename().string(),
+					   index.notes);
 	return index;
 }
 

@@ -32,8 +32,13 @@ Index kitti(const std::string &drive_dir);
 StereoCalibration parse_kitti_calibration(const std::string &file);
 /// EuRoC / ASL: mav0/cam0 and mav0/cam1, each data.csv + data/*.png, paired by timestamp.
 Index euroc(const std::string &sequence_dir);
-/// TUM RGB-D: rgb.txt and depth.txt, associated by nearest timestamp within max_difference_s.
+/// TUM RGB-D: rgb.txt and depth.txt, associated by nearest timestamp within max_difference_s; intrinsics from
+/// the sequence folder's name (tum_intrinsics), so a TUM sequence gets metric points and poses.
 Index tum(const std::string &sequence_dir, double max_difference_s = 0.02);
+/// The intrinsics TUM publishes for the camera a sequence name (rgbd_dataset_freiburgN_...) names: Freiburg 3's
+/// own; ROS's default for Freiburg 1 and 2 (as TUM recommends for registered depth) and for other names (with
+/// a note).
+StereoCalibration tum_intrinsics(const std::string &sequence_name, std::vector<std::string> &notes);
 /// A folder with left/ and right/ subfolders of images paired by sorted name; timestamps from
 /// timestamps.txt (one per line, seconds) if present, else frame index / fps.
 Index folder_pair(const std::string &dir, double fps);

@@ -168,6 +168,26 @@ TEST(Datasets, TumAssociatesDepthByNearestTime)
 		EXPECT_FLOAT_EQ(frame.depth.at<float>(5, 5), static_cast<float>(i + 1)) << "5000 units per metre";
 		EXPECT_EQ(frame.device_ns, 1305031102'000000000LL + (100000 + i * 33333) * 1000LL);
 	}
+	// A folder that names no Freiburg camera: ROS's default intrinsics, and a note saying so.
+	ASSERT_TRUE(source->info().calibration);
+	EXPECT_DOUBLE_EQ(source->info().calibration->fx, 525.0);
+	EXPECT_DOUBLE_EQ(source->info().calibration->cy, 239.5);
+}
+
+TEST(Datasets, TumIntrinsicsFollowTheSequenceName)
+{
+	std::vector<std::string> notes;
+	const auto fr3 = datasets::tum_intrinsics("rgbd_dataset_freiburg3_walking_xyz", notes);
+	EXPECT_DOUBLE_EQ(fr3.fx, 535.4);
+	EXPECT_DOUBLE_EQ(fr3.fy, 539.2);
+	EXPECT_DOUBLE_EQ(fr3.cx, 320.1);
+	EXPECT_DOUBLE_EQ(fr3.cy, 247.6);
+	const auto fr1 = datasets::tum_intrinsics("rgbd_dataset_freiburg1_xyz", notes);
+	EXPECT_DOUBLE_EQ(fr1.fx, 525.0);
+	EXPECT_TRUE(notes.empty());
+	datasets::tum_intrinsics("my_sequence", notes);
+	ASSERT_EQ(notes.size(), 1U);
+	EXPECT_NE(notes[0].find("ROS's default"), std::string::npos);
 }
 
 TEST(Datasets, FolderPairWithAndWithoutTimestamps)
