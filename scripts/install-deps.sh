@@ -30,6 +30,8 @@ if $test_beds; then
   # the service's unit checks (systemd-analyze verify / security), and real systemd booting a fresh bookworm
   # root with the package installed (tests/systemd: debootstrap, systemd-nspawn)
   packages+=(systemd debootstrap systemd-container)
+  # fuzzing the parsers of outside bytes: clang's libFuzzer (tests/fuzz)
+  packages+=(clang libclang-rt-14-dev)
 fi
 
 missing=()

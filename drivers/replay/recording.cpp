@@ -213,6 +213,13 @@ RecordingReader::RecordingReader(const std::string &path) : path_(path)
 	} catch (const std::exception &e) {
 		throw std::runtime_error(path + ": bad recording header: " + e.what());
 	}
+	// A reader's caller allocates frames of this geometry: refuse what no camera makes before it does.
+	constexpr int kMaxSide = 16384;
+	const auto &g = header_.geometry;
+	if (g.width < 1 || g.height < 1 || g.width > kMaxSide || g.height > kMaxSide)
+		throw std::runtime_error(path + ": bad recording header: implausible image size " +
+					 std::to_string(g.width) + "x" + std::to_string(g.height) + " (1 to " +
+					 std::to_string(kMaxSide) + " a side)");
 	offset_ = sizeof(kMagic) + 8 + json.size() + 4;
 }
 

@@ -15,7 +15,6 @@ namespace {
 namespace fs = std::filesystem;
 
 constexpr double kGroundY = 1.4; ///< camera height above the ground (y points down)
-constexpr double kWallZ = 14.0;	 ///< distance of the back wall (the walk's is farther)
 constexpr double kNearZ = 0.05;	 ///< near clipping plane
 
 cv::Matx33d rotation_y(double a)

@@ -123,3 +123,29 @@ TEST(Recording, RejectsWhatIsNotARecording)
 	fs::remove(path);
 	EXPECT_THROW({ RecordingReader reader("/nonexistent/x.srec"); }, std::runtime_error);
 }
+
+// Found by reading what the fuzz target could not reach (the header's CRC guards it from random bytes): a
+// header with a valid CRC but a geometry no camera has (negative, zero or gigantic sizes) made the reader's
+// caller allocate it: cv::Exception (not a runtime_error) or gigabytes. Refused at open, naming the path.
+TEST(Recording, RefusesAnImplausibleGeometry)
+{
+	const auto path =
+		(fs::temp_directory_path() / ("stereod-geometry-" + std::to_string(::getpid()) + ".srec")).string();
+	for (const auto &[w, h] :
+	     {std::pair{-4, 10}, std::pair{0, 10}, std::pair{100000, 100000}, std::pair{640, -1}}) {
+		FrameGeometry g;
+		g.width = w;
+		g.height = h;
+		{
+			RecordingWriter writer(path, {"sim", "forged", g, 0});
+		}
+		try {
+			RecordingReader reader(path);
+			ADD_FAILURE() << w << "x" << h << " was accepted";
+		} catch (const std::runtime_error &e) {
+			EXPECT_NE(std::string(e.what()).find("implausible image size"), std::string::npos) << e.what();
+			EXPECT_NE(std::string(e.what()).find(path), std::string::npos);
+		}
+	}
+	fs::remove(path);
+}
