@@ -32,6 +32,18 @@ std::vector<TrueMover> visible_movers(const cv::Mat &mask, const nlohmann::json 
 		for (int r = 0; r < 3; ++r)
 			for (int c = 0; c < 3; ++c)
 				r_wc(r, c) = truth["camera_pose"][static_cast<size_t>(r * 4 + c)].get<double>();
+	if (!truth.contains("objects")) {
+		for (int id = 1; id < 256; ++id)
+			if (pixels[static_cast<size_t>(id)] >= min_pixels) {
+				TrueMover m;
+				m.id = id;
+				m.pixels = pixels[static_cast<size_t>(id)];
+				m.box = boxes[static_cast<size_t>(id)];
+				m.metric = false;
+				movers.push_back(m);
+			}
+		return movers;
+	}
 	for (const auto &object : truth.value("objects", nlohmann::json::array())) {
 		const int id = object.at("id").get<int>();
 		if (id <= 0 || id > 255 || pixels[static_cast<size_t>(id)] < min_pixels)
@@ -112,6 +124,8 @@ void GroupScore::add(const FrameResult &result, const cv::Mat &mask, const std::
 		if (best == nullptr)
 			continue;
 		++movers_covered;
+		if (!mover.metric)
+			continue;
 		if (const auto it = last_group_of_mover.find(mover.id);
 		    it != last_group_of_mover.end() && it->second != best->id)
 			++id_switches;

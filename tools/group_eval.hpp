@@ -25,9 +25,13 @@ struct TrueMover {
 	cv::Rect box;
 	cv::Vec3d position_m;	      ///< body centre, left camera frame
 	cv::Vec3d world_velocity_mps; ///< in the world frame (the first camera's), as groups report it
+	/// False for a mover known only by its pixels (a reference without 3D truth, `stereoctl reference`): it
+	/// scores counts and coverage, not position, speed, heading or id switches (its ids are per frame).
+	bool metric = true;
 };
 
 /// One truth.ndjson line's objects that show at least `min_pixels` pixels in `mask` (ids as in the mask).
+/// A line without "objects" (a pixels-only reference) makes every mask id with enough pixels a mover.
 std::vector<TrueMover> visible_movers(const cv::Mat &mask, const nlohmann::json &truth, int min_pixels);
 
 /// For each group, the mover it covers: the mover id holding the most mask pixels inside the group's box,

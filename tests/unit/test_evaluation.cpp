@@ -248,3 +248,29 @@ TEST(MotionReference, MedianIgnoresAMoverAndTheMaskFindsIt)
 	params.min_area_px = 1000;			 // larger than the mover: nothing kept
 	EXPECT_EQ(cv::countNonZero(tools::mover_mask(frame, background, params)), 0);
 }
+
+// A pixels-only reference (stereoctl reference writes no "objects"): every mask id with enough pixels is a
+// mover; counts and coverage are scored, nothing metric, and its per-frame ids make no id switches.
+TEST(GroupEvaluation, PixelsOnlyReferenceScoresCountsAndCoverage)
+{
+	cv::Mat mask(240, 480, CV_8UC1, cv::Scalar(0));
+	mask(cv::Rect(100, 50, 40, 100)).setTo(1);
+	mask(cv::Rect(300, 60, 40, 100)).setTo(2);
+	mask(cv::Rect(10, 10, 10, 10)).setTo(3); // 100 px: too small to count
+	const auto movers =
+		tools::visible_movers(mask, nlohmann::json::parse(R"({"seq":4,"mask":"masks/000004.png"})"), 400);
+	ASSERT_EQ(movers.size(), 2U);
+	EXPECT_FALSE(movers[0].metric);
+	tools::GroupScore score;
+	FrameResult frame;
+	frame.groups = {group_at(7, {98, 48, 44, 104}, 1.65, 0, {-1, 0, 5.3})};
+	score.add(frame, mask, movers);
+	frame.groups = {group_at(9, {98, 48, 44, 104}, 1.65, 0, {-1, 0, 5.3}),
+			group_at(10, {300, 60, 40, 100}, 1.0, 0.0, {1, 0, 6})};
+	score.add(frame, mask, movers);
+	EXPECT_EQ(score.count_exact, 1U);
+	EXPECT_EQ(score.movers_covered, 3U);
+	EXPECT_EQ(score.id_switches, 0U) << "mask ids of a pixels-only reference are per frame";
+	EXPECT_TRUE(score.centroid_error_m.empty());
+	EXPECT_TRUE(score.speed_relative_error.empty());
+}
