@@ -300,6 +300,16 @@ std::string status_message(const StatusReport &status)
 				     {"row_diff_px", round_to(status.stereo->row_diff_px, 0.001)},
 				     {"outside_band_fraction", round_to(status.stereo->outside_band_fraction, 0.0001)},
 				     {"drifted", status.stereo->drifted}};
+	if (status.recording) {
+		const auto &r = *status.recording;
+		message["recording"] = {{"path", r.path},
+					{"state", r.state},
+					{"frames", r.frames},
+					{"bytes", r.bytes},
+					{"dropped", r.dropped}};
+		if (!r.error.empty())
+			message["recording"]["error"] = r.error;
+	}
 	return message.dump();
 }
 

@@ -49,6 +49,16 @@ struct StatusReport {
 		bool drifted = false;
 	};
 	std::optional<StereoHealth> stereo;
+	/// Live recording (`[record] path`), when on.
+	struct Recording {
+		std::string path;
+		std::string state; ///< "recording", "failed" (error says why; the stream goes on), "stopped"
+		std::string error;
+		uint64_t frames = 0; ///< complete frames in the file
+		uint64_t bytes = 0;
+		uint64_t dropped = 0; ///< frames not recorded: the disk was slower than the camera
+	};
+	std::optional<Recording> recording;
 };
 
 std::string status_message(const StatusReport &status);

@@ -1,4 +1,5 @@
 #include "daemon/app.hpp"
+#include "daemon/live_recorder.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -295,6 +296,9 @@ int run_daemon(const DaemonConfig &initial, const std::function<DaemonConfig()> 
 	};
 	// The source and the pipeline: built at start, and again in place when a reload changes what they use.
 	PipelineOptions options;
+	// The live recording, when on: shared with the pipeline's frame observer, so a pipeline being replaced
+	// keeps its recorder until its last frame is offered.
+	std::shared_ptr<LiveRecorder> recorder;
 	auto build_pipeline = [&](const DaemonConfig &c) {
 		auto source = registry.create(c.source);
 		const drivers::SourceInfo info = source->info();
@@ -321,6 +325,21 @@ int run_daemon(const DaemonConfig &initial, const std::function<DaemonConfig()> 
 				}
 				server->publish(protocol::frame_message(result));
 			});
+		recorder.reset();
+		if (!c.record.path.empty()) {
+			drivers::RecordingHeader header{info.name, info.description, info.geometry, 0};
+			header.created_unix_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
+							 std::chrono::system_clock::now().time_since_epoch())
+							 .count();
+			try {
+				recorder = std::make_shared<LiveRecorder>(c.record.path, header,
+									  static_cast<size_t>(c.record.buffer_frames),
+									  c.record.sync);
+			} catch (const std::runtime_error &e) {
+				throw ConfigError("record.path: " + std::string(e.what()));
+			}
+			built->set_frame_observer([rec = recorder](const StereoFrame &frame) { rec->offer(frame); });
+		}
 		built->start();
 		spdlog::info("streaming on {} ({} workers, ring {} {})", c.output.socket, o.workers, o.ring_capacity,
 			     to_string(o.overflow));
@@ -356,7 +375,9 @@ int run_daemon(const DaemonConfig &initial, const std::function<DaemonConfig()> 
 		const SocketServerStats server_stats = server->stats();
 		const PipelineStats s = pipeline->stats();
 		const auto [capture_fps, publish_fps] = meter.update(s.frames_captured, s.frames_published);
-		const auto report = make_status(*pipeline, s, server_stats, start_ns, capture_fps, publish_fps);
+		auto report = make_status(*pipeline, s, server_stats, start_ns, capture_fps, publish_fps);
+		if (recorder)
+			report.recording = recorder->stats();
 		server->publish(protocol::status_message(report));
 		uint64_t frames_dropped = 0;
 		for (const auto &[name, count] : report.drops)

@@ -760,6 +760,16 @@ const std::vector<Option> &options()
 		o.push_back(
 			text_list("output", "allow_groups", "members of these groups (names or gids) may read",
 				  [](DaemonConfig &c) -> std::vector<std::string> & { return c.output.allow_groups; }));
+		// [record]: live recording beside the stream (daemon/live_recorder.hpp)
+		o.push_back(text("record", "path",
+				 "record every captured frame to this .srec while streaming; empty: off",
+				 [](DaemonConfig &c) -> std::string & { return c.record.path; }));
+		o.push_back(number(
+			"record", "buffer_frames",
+			"frames waiting for the disk at most (more are counted, not recorded)",
+			[](DaemonConfig &c) -> int & { return c.record.buffer_frames; }, 1, 1024));
+		o.push_back(boolean("record", "sync", "force each frame to the disk before the next (power-cut safe)",
+				    [](DaemonConfig &c) -> bool & { return c.record.sync; }));
 		// [log]
 		o.push_back(text("log", "level", "trace | debug | info | warn | error",
 				 [](DaemonConfig &c) -> std::string & { return c.log.level; },

@@ -40,12 +40,19 @@ struct CalibrationConfig {
 	std::string file;
 };
 
+struct RecordConfig {
+	std::string path;      ///< live recording (.srec) beside the stream; empty: off
+	int buffer_frames = 8; ///< frames copied and waiting for the disk at most
+	bool sync = false;     ///< force each frame to the disk before the next (slower, power-cut safe)
+};
+
 struct DaemonConfig {
 	drivers::SourceConfig source;
 	CalibrationConfig calibration;
 	PipelineConfig pipeline;
 	vision::MotionParams motion;
 	OutputConfig output;
+	RecordConfig record;
 	LogConfig log;
 };
 

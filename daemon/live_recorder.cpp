@@ -1,0 +1,157 @@
+#include "daemon/live_recorder.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <filesystem>
+
+#include <spdlog/spdlog.h>
+
+namespace stereod::daemon {
+
+namespace {
+
+/// `src` into `dst`, whose buffers already have `src`'s geometry (no allocation).
+void copy_frame(const StereoFrame &src, StereoFrame &dst)
+{
+	dst.sequence = src.sequence;
+	dst.device_ns = src.device_ns;
+	dst.host_ns = src.host_ns;
+	dst.lr_skew_ns = src.lr_skew_ns;
+	dst.status = src.status;
+	dst.source_id = src.source_id;
+	src.left.copyTo(dst.left);
+	if (!src.right.empty())
+		src.right.copyTo(dst.right);
+	if (!src.depth.empty())
+		src.depth.copyTo(dst.depth);
+	if (!src.truth.object_ids.empty())
+		src.truth.object_ids.copyTo(dst.truth.object_ids);
+	dst.truth.camera_pose = src.truth.camera_pose;
+	dst.truth.objects = src.truth.objects;
+	dst.truth.object_count = src.truth.object_count;
+}
+
+/// A recording already at `path` (an earlier run, or the run before a reload) is kept: moved aside to
+/// `path.<n>` with the first free n, never overwritten.
+const std::string &keep_existing(const std::string &path)
+{
+	namespace fs = std::filesystem;
+	std::error_code ec;
+	if (!fs::exists(path, ec) || fs::file_size(path, ec) == 0)
+		return path;
+	for (int n = 1; n < 100000; ++n) {
+		const std::string aside = path + "." + std::to_string(n);
+		if (fs::exists(aside, ec))
+			continue;
+		fs::rename(path, aside, ec);
+		if (!ec)
+			spdlog::info("recording: the earlier {} is kept as {}", path, aside);
+		break;
+	}
+	return path;
+}
+
+} // namespace
+
+LiveRecorder::LiveRecorder(const std::string &path, const drivers::RecordingHeader &header, size_t slots, bool sync)
+	: path_(path), writer_(keep_existing(path), header), sync_(sync), slots_(std::max<size_t>(slots, 1))
+{
+	for (size_t i = 0; i < slots_.size(); ++i) {
+		slots_[i].allocate(header.geometry);
+		free_.push_back(i);
+	}
+	queued_.reserve(slots_.size());
+	thread_ = std::thread([this] { write_loop(); });
+	spdlog::info("recording to {} ({} frames buffered)", path_, slots_.size());
+}
+
+LiveRecorder::~LiveRecorder()
+{
+	{
+		std::lock_guard lock(mutex_);
+		stopping_ = true;
+	}
+	queued_cv_.notify_all();
+	thread_.join();
+	const auto s = stats();
+	spdlog::info("recording {}: {} frames, {} bytes{}{}", path_, s.frames, s.bytes,
+		     s.dropped > 0 ? ", " + std::to_string(s.dropped) + " frames not recorded (disk too slow)" : "",
+		     s.error.empty() ? "" : "; stopped early: " + s.error);
+}
+
+void LiveRecorder::offer(const StereoFrame &frame)
+{
+	size_t slot = 0;
+	{
+		std::lock_guard lock(mutex_);
+		if (failed_ || stopping_)
+			return;
+		if (free_.empty()) {
+			dropped_.fetch_add(1);
+			return;
+		}
+		slot = free_.back();
+		free_.pop_back();
+	}
+	copy_frame(frame, slots_[slot]); // outside the lock: the slot is this thread's until queued
+	{
+		std::lock_guard lock(mutex_);
+		queued_.push_back(slot);
+	}
+	queued_cv_.notify_one();
+}
+
+void LiveRecorder::write_loop()
+{
+	std::unique_lock lock(mutex_);
+	for (;;) {
+		// Workers finish frames a little out of order: wait briefly for a second frame so that the file is
+		// in sequence order within that window.
+		queued_cv_.wait(lock, [&] { return stopping_ || !queued_.empty(); });
+		if (queued_.empty() && stopping_)
+			return;
+		if (queued_.size() < 2 && !stopping_)
+			queued_cv_.wait_for(lock, std::chrono::milliseconds(20),
+					    [&] { return stopping_ || queued_.size() >= 2; });
+		const auto oldest = std::min_element(queued_.begin(), queued_.end(), [&](size_t a, size_t b) {
+			return slots_[a].sequence < slots_[b].sequence;
+		});
+		const size_t slot = *oldest;
+		queued_.erase(oldest);
+		const bool failed = failed_;
+		lock.unlock();
+		std::string error;
+		if (!failed) {
+			try {
+				writer_.append(slots_[slot], sync_);
+			} catch (const std::exception &e) {
+				error = e.what();
+			}
+		}
+		lock.lock();
+		free_.push_back(slot);
+		if (!error.empty() && !failed_) {
+			failed_ = true;
+			error_ = error;
+			spdlog::error("recording stopped: {} ({} complete frames kept in {}); the stream goes on",
+				      error, writer_.frames_written(), path_);
+		}
+		frames_ = writer_.frames_written();
+		bytes_ = writer_.bytes_written();
+	}
+}
+
+protocol::StatusReport::Recording LiveRecorder::stats() const
+{
+	std::lock_guard lock(mutex_);
+	protocol::StatusReport::Recording r;
+	r.path = path_;
+	r.state = failed_ ? "failed" : (stopping_ ? "stopped" : "recording");
+	r.error = error_;
+	r.frames = frames_;
+	r.bytes = bytes_;
+	r.dropped = dropped_.load();
+	return r;
+}
+
+} // namespace stereod::daemon
