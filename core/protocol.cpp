@@ -1,7 +1,9 @@
 #include "core/protocol.hpp"
 
 #include <cmath>
+#include <limits>
 #include <stdexcept>
+#include <type_traits>
 
 #include <nlohmann/json.hpp>
 
@@ -178,43 +180,112 @@ std::string frame_message(const FrameResult &result)
 	return message.dump();
 }
 
+namespace {
+
+/// A number from outside bytes as T, refused (std::runtime_error) when it is not a number or T cannot hold it:
+/// nlohmann's own conversion is a static_cast, undefined for 1e24 as an int or 1e300 as a float (found by
+/// fuzz_frame_message).
+template <typename T>
+T checked(const json &j)
+{
+	if (!j.is_number())
+		throw std::runtime_error("not a number: " + j.dump().substr(0, 40));
+	if constexpr (std::is_floating_point_v<T>) {
+		const double d = j.get<double>();
+		if (std::isfinite(d) && std::abs(d) > static_cast<double>(std::numeric_limits<T>::max()))
+			throw std::runtime_error("number out of range: " + j.dump().substr(0, 40));
+		return static_cast<T>(d);
+	} else {
+		if (j.is_number_unsigned()) {
+			const auto u = j.get<uint64_t>();
+			if (u > static_cast<uint64_t>(std::numeric_limits<T>::max()))
+				throw std::runtime_error("number out of range: " + j.dump().substr(0, 40));
+			return static_cast<T>(u);
+		}
+		if (j.is_number_integer()) {
+			const auto i = j.get<int64_t>();
+			if constexpr (std::is_unsigned_v<T>) {
+				if (i < 0 ||
+				    static_cast<uint64_t>(i) > static_cast<uint64_t>(std::numeric_limits<T>::max()))
+					throw std::runtime_error("number out of range: " + j.dump().substr(0, 40));
+			} else if (i < static_cast<int64_t>(std::numeric_limits<T>::lowest()) ||
+				   i > static_cast<int64_t>(std::numeric_limits<T>::max())) {
+				throw std::runtime_error("number out of range: " + j.dump().substr(0, 40));
+			}
+			return static_cast<T>(i);
+		}
+		const double d = j.get<double>();
+		// The bounds as doubles: 2^63 and friends are exact; a value must lie strictly inside them.
+		if (!(d >= static_cast<double>(std::numeric_limits<T>::lowest()) &&
+		      d < static_cast<double>(std::numeric_limits<T>::max())))
+			throw std::runtime_error("number out of range: " + j.dump().substr(0, 40));
+		return static_cast<T>(d);
+	}
+}
+
+template <typename T>
+T field(const json &object, const char *key)
+{
+	return checked<T>(object.at(key));
+}
+
+template <typename T>
+T field_or(const json &object, const char *key, T fallback)
+{
+	const auto it = object.find(key);
+	return it == object.end() ? fallback : checked<T>(*it);
+}
+
+template <typename T, size_t N>
+std::array<T, N> array_field(const json &j)
+{
+	if (!j.is_array() || j.size() != N)
+		throw std::runtime_error("not an array of " + std::to_string(N) + " numbers");
+	std::array<T, N> out{};
+	for (size_t i = 0; i < N; ++i)
+		out[i] = checked<T>(j[i]);
+	return out;
+}
+
+} // namespace
+
 FrameResult parse_frame_message(const json &message)
 {
 	if (message.at("type").get<std::string>() != "frame")
 		throw std::runtime_error("not a frame message");
-	if (message.at("v").get<int>() != kVersion)
+	if (field<int>(message, "v") != kVersion)
 		throw std::runtime_error("unsupported protocol version " + message.at("v").dump());
 	FrameResult result;
-	result.seq = message.at("seq").get<uint64_t>();
-	result.t_capture_ns = message.at("t_capture_ns").get<int64_t>();
-	result.t_host_ns = message.at("t_host_ns").get<int64_t>();
-	result.t_publish_ns = message.at("t_publish_ns").get<int64_t>();
-	result.lr_skew_ns = message.value("lr_skew_ns", int64_t{0});
+	result.seq = field<uint64_t>(message, "seq");
+	result.t_capture_ns = field<int64_t>(message, "t_capture_ns");
+	result.t_host_ns = field<int64_t>(message, "t_host_ns");
+	result.t_publish_ns = field<int64_t>(message, "t_publish_ns");
+	result.lr_skew_ns = field_or<int64_t>(message, "lr_skew_ns", 0);
 	result.source = message.at("source").get<std::string>();
 	result.status = parse_status(message.at("status").get<std::string>());
-	result.width = message.value("width", 0);
-	result.height = message.value("height", 0);
+	result.width = field_or<int>(message, "width", 0);
+	result.height = field_or<int>(message, "height", 0);
 	for (const auto &[name, ms] : message.at("timing_ms").items())
-		result.timing.push_back({name, ms.get<double>()});
+		result.timing.push_back({name, checked<double>(ms)});
 	for (const auto &p : message.at("points")) {
 		LabelledPoint point;
-		point.u = p.at("u").get<float>();
-		point.v = p.at("v").get<float>();
+		point.u = field<float>(p, "u");
+		point.v = field<float>(p, "v");
 		point.label = parse_label(p.at("label").get<std::string>());
-		point.prev_u = p.value("pu", point.u);
-		point.prev_v = p.value("pv", point.v);
-		point.track = p.value("track", uint64_t{0});
+		point.prev_u = field_or<float>(p, "pu", point.u);
+		point.prev_v = field_or<float>(p, "pv", point.v);
+		point.track = field_or<uint64_t>(p, "track", 0);
 		if (p.contains("xyz_m"))
-			point.xyz_m = p.at("xyz_m").get<std::array<float, 3>>();
+			point.xyz_m = array_field<float, 3>(p.at("xyz_m"));
 		point.in_person = p.value("person", false);
 		result.points.push_back(point);
 	}
 	if (const auto &ego = message.at("ego"); !ego.is_null()) {
 		EgoMotion e;
-		e.inliers = ego.at("inliers").get<int>();
+		e.inliers = field<int>(ego, "inliers");
 		if (ego.contains("homography") && !ego.at("homography").is_null()) {
-			e.homography = ego.at("homography").get<std::array<double, 9>>();
-			e.homography_inliers = ego.value("homography_inliers", e.inliers);
+			e.homography = array_field<double, 9>(ego.at("homography"));
+			e.homography_inliers = field_or<int>(ego, "homography_inliers", e.inliers);
 			e.homography_refined = ego.value("homography_refined", true);
 		}
 		if (ego.contains("valid")) {
@@ -223,49 +294,49 @@ FrameResult parse_frame_message(const json &message)
 			for (const auto &[key, field] :
 			     {std::pair{"T_prev_curr", &e.t_prev_curr}, std::pair{"T_world_curr", &e.t_world_curr}})
 				if (ego.contains(key) && !ego.at(key).is_null())
-					*field = ego.at(key).get<std::array<double, 16>>();
+					*field = array_field<double, 16>(ego.at(key));
 		}
 		if (ego.contains("keyframe"))
 			e.keyframe = ego.at("keyframe").get<bool>();
 		if (ego.contains("covisibility"))
-			e.covisibility = ego.at("covisibility").get<double>();
+			e.covisibility = field<double>(ego, "covisibility");
 		result.ego = e;
 	}
 	if (message.contains("stereo")) {
 		const auto &s = message.at("stereo");
-		result.stereo = StereoSummary{s.at("keypoints").get<int>(), s.at("matched").get<int>(),
-					      s.at("candidates").get<int>(), s.at("outside_band").get<int>(),
-					      s.at("median_row_diff_px").get<float>()};
+		result.stereo =
+			StereoSummary{field<int>(s, "keypoints"), field<int>(s, "matched"), field<int>(s, "candidates"),
+				      field<int>(s, "outside_band"), field<float>(s, "median_row_diff_px")};
 	}
 	for (const auto &g : message.at("groups")) {
 		TargetGroup group;
-		group.id = g.at("id").get<int>();
-		group.box_px = g.at("box_px").get<std::array<float, 4>>();
-		group.point_count = g.at("points").get<int>();
-		group.age_frames = g.at("age_frames").get<int>();
-		group.image_velocity_pxps = g.at("image_velocity_pxps").get<std::array<float, 2>>();
+		group.id = field<int>(g, "id");
+		group.box_px = array_field<float, 4>(g.at("box_px"));
+		group.point_count = field<int>(g, "points");
+		group.age_frames = field<int>(g, "age_frames");
+		group.image_velocity_pxps = array_field<float, 2>(g.at("image_velocity_pxps"));
 		const auto get3 = [&g](const char *key) -> std::optional<std::array<double, 3>> {
 			if (!g.contains(key))
 				return std::nullopt;
-			return g.at(key).get<std::array<double, 3>>();
+			return array_field<double, 3>(g.at(key));
 		};
 		group.position_m = get3("position_m");
 		group.extent_m = get3("extent_m");
 		group.velocity_mps = get3("velocity_mps");
 		group.world_velocity_mps = get3("world_velocity_mps");
 		if (g.contains("speed_mps"))
-			group.speed_mps = g.at("speed_mps").get<double>();
+			group.speed_mps = field<double>(g, "speed_mps");
 		if (g.contains("heading_rad"))
-			group.heading_rad = g.at("heading_rad").get<double>();
+			group.heading_rad = field<double>(g, "heading_rad");
 		group.class_name = g.value("class", std::string());
 		result.groups.push_back(group);
 	}
 	if (message.contains("people"))
 		for (const auto &p : message.at("people")) {
 			PersonRegion person;
-			person.box_px = p.at("box_px").get<std::array<float, 4>>();
-			person.score = p.value("score", 0.0F);
-			person.age_frames = p.value("age_frames", 0);
+			person.box_px = array_field<float, 4>(p.at("box_px"));
+			person.score = field_or<float>(p, "score", 0.0F);
+			person.age_frames = field_or<int>(p, "age_frames", 0);
 			result.people.push_back(person);
 		}
 	return result;

@@ -1,5 +1,6 @@
 #include "drivers/replay/recording.hpp"
 
+#include <algorithm>
 #include <cerrno>
 #include <cstring>
 #include <fcntl.h>
@@ -168,6 +169,20 @@ RecordingReader::RecordingReader(const std::string &path) : path_(path)
 	file_ = std::fopen(path.c_str(), "rb");
 	if (!file_)
 		throw std::runtime_error(path + ": cannot open recording: " + std::strerror(errno));
+	// A refused file is closed here: the destructor does not run for a constructor that throws (each refused
+	// recording leaked its FILE; fuzz_recording ran out of memory on them).
+	try {
+		read_header();
+	} catch (...) {
+		std::fclose(file_);
+		file_ = nullptr;
+		throw;
+	}
+}
+
+void RecordingReader::read_header()
+{
+	const std::string &path = path_;
 	struct stat st {
 	};
 	if (::fstat(::fileno(file_), &st) == 0)
@@ -196,8 +211,16 @@ RecordingReader::RecordingReader(const std::string &path) : path_(path)
 		const auto j = nlohmann::json::parse(json);
 		header_.source = j.at("source").get<std::string>();
 		header_.description = j.value("description", "");
-		header_.geometry.width = j.at("width").get<int>();
-		header_.geometry.height = j.at("height").get<int>();
+		// Sizes as 64-bit integers first: a float or a huge number converted straight to int is undefined.
+		const auto side = [&j](const char *key) {
+			const auto &v = j.at(key);
+			if (!v.is_number_integer())
+				throw std::runtime_error(std::string(key) + " is not an integer");
+			const auto n = v.get<int64_t>();
+			return static_cast<int>(std::clamp<int64_t>(n, -1, int64_t{1} << 30));
+		};
+		header_.geometry.width = side("width");
+		header_.geometry.height = side("height");
 		const auto format = j.at("format").get<std::string>();
 		if (format == "mono8")
 			header_.geometry.format = PixelFormat::Mono8;
@@ -208,8 +231,12 @@ RecordingReader::RecordingReader(const std::string &path) : path_(path)
 		header_.geometry.stereo = j.at("stereo").get<bool>();
 		header_.geometry.depth = j.at("depth").get<bool>();
 		header_.geometry.truth = j.at("truth").get<bool>();
-		header_.geometry.nominal_fps = j.value("nominal_fps", 0.0);
-		header_.created_unix_ns = j.value("created_unix_ns", int64_t{0});
+		header_.geometry.nominal_fps = j.contains("nominal_fps") && j.at("nominal_fps").is_number()
+						       ? j.at("nominal_fps").get<double>()
+						       : 0.0;
+		header_.created_unix_ns = j.contains("created_unix_ns") && j.at("created_unix_ns").is_number_integer()
+						  ? j.at("created_unix_ns").get<int64_t>()
+						  : 0;
 	} catch (const std::exception &e) {
 		throw std::runtime_error(path + ": bad recording header: " + e.what());
 	}

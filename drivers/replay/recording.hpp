@@ -72,6 +72,7 @@ public:
 	[[nodiscard]] const RecoveryReport &report() const { return report_; }
 
 private:
+	void read_header();
 	bool fail(const std::string &reason);
 
 	std::string path_;

@@ -159,6 +159,25 @@ TEST(Protocol, PersonPriorFieldsRoundTripAndAreAbsentWhenOff)
 	EXPECT_EQ(back.groups[0].class_name, "person");
 }
 
+// Found by fuzz_frame_message: nlohmann converts numbers with a static_cast, so "width": 1e24 as an int (or
+// 1e300 as a float, -1 as a uint64) was undefined behaviour in any client parsing the stream. Refused now.
+TEST(Protocol, NumbersOutOfRangeAreRefusedNotCast)
+{
+	FrameResult r;
+	r.points.push_back(LabelledPoint{});
+	const auto good = nlohmann::json::parse(protocol::frame_message(r));
+	EXPECT_NO_THROW(protocol::parse_frame_message(good));
+	for (const auto &[key, value] : {std::pair{"width", nlohmann::json(1e24)}, std::pair{"seq", nlohmann::json(-1)},
+					 std::pair{"t_capture_ns", nlohmann::json(1e30)}}) {
+		auto bad = good;
+		bad[key] = value;
+		EXPECT_THROW(protocol::parse_frame_message(bad), std::runtime_error) << key;
+	}
+	auto far = good;
+	far["points"][0]["u"] = 1e300;
+	EXPECT_THROW(protocol::parse_frame_message(far), std::runtime_error);
+}
+
 TEST(Protocol, RejectsOtherVersions)
 {
 	auto j = nlohmann::json::parse(protocol::frame_message(FrameResult{}));

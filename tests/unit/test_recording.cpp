@@ -131,6 +131,23 @@ TEST(Recording, RejectsWhatIsNotARecording)
 // Found by reading what the fuzz target could not reach (the header's CRC guards it from random bytes): a
 // header with a valid CRC but a geometry no camera has (negative, zero or gigantic sizes) made the reader's
 // caller allocate it: cv::Exception (not a runtime_error) or gigabytes. Refused at open, naming the path.
+// Found by fuzz_recording (out of memory): a constructor that throws runs no destructor, so every refused
+// recording leaked its open FILE. Refusing many files must not grow the process's open descriptors.
+TEST(Recording, ARefusedFileIsClosed)
+{
+	const auto path =
+		(fs::temp_directory_path() / ("stereod-refused-" + std::to_string(::getpid()) + ".srec")).string();
+	std::ofstream(path) << "not a recording, but long enough to be read as one's magic";
+	const auto open_fds = [] {
+		return std::distance(fs::directory_iterator("/proc/self/fd"), fs::directory_iterator{});
+	};
+	const auto before = open_fds();
+	for (int i = 0; i < 200; ++i)
+		EXPECT_THROW({ RecordingReader reader(path); }, std::runtime_error);
+	EXPECT_EQ(open_fds(), before);
+	fs::remove(path);
+}
+
 TEST(Recording, RefusesAnImplausibleGeometry)
 {
 	const auto path =
