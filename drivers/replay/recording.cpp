@@ -282,6 +282,12 @@ bool RecordingReader::next(StereoFrame &into)
 		return fail("no record marker");
 	if (head[1] > kMaxPayload)
 		return fail("implausible record length " + std::to_string(head[1]));
+	// A length the rest of the file cannot hold is a cut (or a corrupt length): said before allocating it
+	// (fuzz_recording ran out of memory on a 50 KB file claiming a record of hundreds of megabytes).
+	const uint64_t after_head = offset_ + sizeof(head);
+	const uint64_t left = file_size_ > after_head ? file_size_ - after_head : 0;
+	if (file_size_ > 0 && head[1] > left)
+		return fail("record cut short (" + std::to_string(left) + " of " + std::to_string(head[1]) + " bytes)");
 	buffer_.resize(head[1]);
 	const size_t payload = std::fread(buffer_.data(), 1, head[1], file_);
 	if (payload != head[1])

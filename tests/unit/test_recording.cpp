@@ -1,5 +1,7 @@
 #include <gtest/gtest.h>
 
+#include <sys/resource.h>
+
 #include <chrono>
 #include <filesystem>
 #include <fstream>
@@ -105,6 +107,29 @@ TEST_F(RecordingTest, TruncationAnywhereKeepsEveryCompleteFrame)
 		EXPECT_EQ(reader.report().bytes_dropped, cut - sizes_[2]);
 		EXPECT_NE(reader.report().describe().find("3 complete frames recovered"), std::string::npos);
 	}
+}
+
+// Found by fuzz_recording (out of memory): a record claiming more bytes than the file has left was allocated
+// before being read. It is a cut, said before any allocation.
+TEST_F(RecordingTest, ARecordLongerThanTheFileIsACutNotAnAllocation)
+{
+	{
+		std::fstream f(path_, std::ios::in | std::ios::out | std::ios::binary);
+		f.seekp(static_cast<std::streamoff>(sizes_[1] + 4)); // the 3rd record's length field
+		const uint32_t huge = 900U << 20;		     // 900 MB, under the format's 1 GB limit
+		f.write(reinterpret_cast<const char *>(&huge), sizeof(huge));
+	}
+	const auto peak_kb = [] {
+		rusage usage{};
+		getrusage(RUSAGE_SELF, &usage);
+		return usage.ru_maxrss;
+	};
+	const long before = peak_kb();
+	RecordingReader reader(path_);
+	EXPECT_EQ(read_all(reader), 2U);
+	EXPECT_EQ(reader.report().cut_at_offset, sizes_[1]);
+	EXPECT_NE(reader.report().reason.find("record cut short"), std::string::npos) << reader.report().reason;
+	EXPECT_LT(peak_kb() - before, 100 * 1024) << "the claimed 900 MB were allocated";
 }
 
 TEST_F(RecordingTest, ACorruptByteStopsAtThatRecord)
