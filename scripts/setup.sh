@@ -60,10 +60,10 @@ test)
 	(cd build-tsan && TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1 suppressions=$ROOT/tests/tsan.supp" \
 		ctest -j "$JOBS" --output-on-failure --timeout 900 -R 'SpscRing|FramePool|Pipeline|SocketServer|LiveRecorder')
 
-	section "fuzzing: the parsers of outside bytes (libFuzzer, clang, ASan + UBSan), ${STEREOD_FUZZ_SECONDS:-30} s each"
+	section "fuzzing: the parsers of outside bytes (libFuzzer, clang, ASan + UBSan), fixed inputs from seed ${STEREOD_FUZZ_SEED:-1}"
 	CC=clang CXX=clang++ build build-fuzz "${SANITIZER_FLAGS[@]}" -DSTEREOD_WERROR=ON -DSTEREOD_FUZZ=ON \
 		-DSTEREOD_TESTS=OFF -DSTEREOD_TOOLS=OFF
-	bash tests/fuzz/run_fuzz.sh build-fuzz "${STEREOD_FUZZ_SECONDS:-30}"
+	bash tests/fuzz/run_fuzz.sh build-fuzz ${STEREOD_FUZZ_SECONDS:+"$STEREOD_FUZZ_SECONDS"}
 
 	section "done in $(($(date +%s) - START)) s"
 	;;
