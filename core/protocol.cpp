@@ -408,3 +408,103 @@ std::string hello_message(int64_t t_host_ns, const std::string &source, int widt
 
 } // namespace protocol
 } // namespace stereod
+
+namespace stereod::protocol {
+
+std::string_view frame_json_schema()
+{
+	// Kept beside frame_message(): a field added there belongs here too (test_protocol checks every field
+	// of a full message is described).
+	return R"schema({
+  "$schema": "https://json-schema.org/draft/2020-12/schema",
+  "title": "stereod.Frame",
+  "description": "One processed frame from stereod (protocol version 1, docs/protocol.md)",
+  "type": "object",
+  "required": ["v", "type", "seq", "t_capture_ns", "t_host_ns", "t_publish_ns", "source", "status", "width", "height", "points", "groups"],
+  "properties": {
+    "v": {"type": "integer", "const": 1},
+    "type": {"type": "string", "const": "frame"},
+    "seq": {"type": "integer", "minimum": 0},
+    "t_capture_ns": {"type": "integer", "description": "exposure time on the source's clock, ns"},
+    "t_host_ns": {"type": "integer", "description": "CLOCK_MONOTONIC when the frame was complete on the host, ns"},
+    "t_publish_ns": {"type": "integer", "description": "CLOCK_MONOTONIC when the result left the pipeline, ns"},
+    "lr_skew_ns": {"type": "integer"},
+    "source": {"type": "string"},
+    "status": {"type": "string", "enum": ["ok", "incomplete", "corrupt"]},
+    "width": {"type": "integer"},
+    "height": {"type": "integer"},
+    "timing_ms": {"type": "object", "additionalProperties": {"type": "number"}},
+    "points": {
+      "type": "array",
+      "items": {
+        "type": "object",
+        "required": ["u", "v", "label"],
+        "properties": {
+          "u": {"type": "number"}, "v": {"type": "number"},
+          "label": {"type": "string", "enum": ["static", "dynamic", "uncertain"]},
+          "pu": {"type": "number"}, "pv": {"type": "number"},
+          "track": {"type": "integer"},
+          "xyz_m": {"type": "array", "items": {"type": "number"}, "minItems": 3, "maxItems": 3},
+          "person": {"type": "boolean"}
+        }
+      }
+    },
+    "ego": {
+      "type": ["object", "null"],
+      "properties": {
+        "inliers": {"type": "integer"},
+        "homography": {"type": ["array", "null"], "items": {"type": "number"}},
+        "homography_inliers": {"type": "integer"},
+        "homography_refined": {"type": "boolean"},
+        "valid": {"type": "boolean"},
+        "reason": {"type": "string"},
+        "T_prev_curr": {"type": ["array", "null"], "items": {"type": "number"}, "minItems": 16, "maxItems": 16},
+        "T_world_curr": {"type": ["array", "null"], "items": {"type": "number"}, "minItems": 16, "maxItems": 16},
+        "keyframe": {"type": "boolean"},
+        "covisibility": {"type": "number"}
+      }
+    },
+    "stereo": {
+      "type": "object",
+      "properties": {
+        "keypoints": {"type": "integer"}, "matched": {"type": "integer"}, "candidates": {"type": "integer"},
+        "outside_band": {"type": "integer"}, "median_row_diff_px": {"type": "number"}
+      }
+    },
+    "groups": {
+      "type": "array",
+      "items": {
+        "type": "object",
+        "required": ["id", "box_px", "points"],
+        "properties": {
+          "id": {"type": "integer"},
+          "box_px": {"type": "array", "items": {"type": "number"}, "minItems": 4, "maxItems": 4},
+          "points": {"type": "integer"},
+          "age_frames": {"type": "integer"},
+          "image_velocity_pxps": {"type": "array", "items": {"type": "number"}},
+          "position_m": {"type": "array", "items": {"type": "number"}},
+          "extent_m": {"type": "array", "items": {"type": "number"}},
+          "velocity_mps": {"type": "array", "items": {"type": "number"}},
+          "world_velocity_mps": {"type": "array", "items": {"type": "number"}},
+          "speed_mps": {"type": "number"},
+          "heading_rad": {"type": "number"},
+          "class": {"type": "string"}
+        }
+      }
+    },
+    "people": {
+      "type": "array",
+      "items": {
+        "type": "object",
+        "properties": {
+          "box_px": {"type": "array", "items": {"type": "number"}, "minItems": 4, "maxItems": 4},
+          "score": {"type": "number"},
+          "age_frames": {"type": "integer"}
+        }
+      }
+    }
+  }
+})schema";
+}
+
+} // namespace stereod::protocol

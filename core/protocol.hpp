@@ -5,6 +5,7 @@
 #include <map>
 #include <optional>
 #include <string>
+#include <string_view>
 
 #include <nlohmann/json_fwd.hpp>
 
@@ -16,6 +17,9 @@ inline constexpr int kVersion = 1;
 
 /// One `frame` message, without the trailing newline.
 std::string frame_message(const FrameResult &result);
+/// A JSON Schema (draft 2020-12) of the `frame` message, for containers that carry a schema beside the data
+/// (MCAP's `jsonschema` encoding, docs/mcap.md). Field meanings are in docs/protocol.md.
+std::string_view frame_json_schema();
 
 /// Parses a `frame` message back (used by the tools: eval, render, watch). Throws on malformed input.
 FrameResult parse_frame_message(const nlohmann::json &message);

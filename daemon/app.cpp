@@ -29,6 +29,7 @@
 #include "daemon/socket_server.hpp"
 #include "daemon/watchdog.hpp"
 #include "drivers/calibration_file.hpp"
+#include "drivers/replay/mcap_recording.hpp"
 
 namespace stereod::daemon {
 namespace {
@@ -205,7 +206,7 @@ size_t default_workers()
 
 std::string driver_for_format(const std::string &format, const std::string &path)
 {
-	if (format == "recording" || format == "replay" || format == "srec")
+	if (format == "recording" || format == "replay" || format == "srec" || format == "mcap")
 		return "replay";
 	if (format == "video" || format == "kitti" || format == "euroc" || format == "tum" || format == "folder" ||
 	    format == "sim")
@@ -226,7 +227,7 @@ std::string driver_for_format(const std::string &format, const std::string &path
 			return "folder";
 		throw ConfigError("--input " + path + ": cannot tell the dataset layout; give --format");
 	}
-	if (p.extension() == ".srec")
+	if (p.extension() == ".srec" || p.extension() == ".mcap")
 		return "replay";
 	return "video";
 }
@@ -315,31 +316,40 @@ int run_daemon(const DaemonConfig &initial, const std::function<DaemonConfig()> 
 		} else {
 			server->set_greeting(std::move(hello));
 		}
+		recorder.reset();
+		if (!c.record.path.empty()) {
+			drivers::RecorderOptions record_options;
+			record_options.images = c.record.images;
+			record_options.results = c.record.results;
+			try {
+				recorder = std::make_shared<LiveRecorder>(
+					c.record.path,
+					drivers::RecordingHeader::stamped_now(info.name, info.description,
+									      info.geometry),
+					static_cast<size_t>(c.record.buffer_frames), c.record.sync, record_options);
+			} catch (const std::runtime_error &e) {
+				throw ConfigError("record.path: " + std::string(e.what()));
+			}
+		}
+		// The sink holds its own reference: a pipeline being replaced keeps its recorder until it is gone.
+		std::shared_ptr<LiveRecorder> result_recorder =
+			recorder && recorder->records_results() ? recorder : nullptr;
 		auto built = std::make_unique<Pipeline>(
-			std::move(source), o, [&server, hang_after, &sunk](FrameResult &result) {
+			std::move(source), o,
+			[&server, hang_after, &sunk, rec = std::move(result_recorder)](FrameResult &result) {
 				if (hang_after > 0 && ++sunk > hang_after) {
 					spdlog::warn("STEREOD_TEST_FAULT: the publisher hangs from frame {} on",
 						     result.seq);
 					for (;;)
 						std::this_thread::sleep_for(std::chrono::hours(1));
 				}
-				server->publish(protocol::frame_message(result));
+				std::string message = protocol::frame_message(result);
+				if (rec)
+					rec->offer_result(result.t_capture_ns, message);
+				server->publish(std::move(message));
 			});
-		recorder.reset();
-		if (!c.record.path.empty()) {
-			drivers::RecordingHeader header{info.name, info.description, info.geometry, 0};
-			header.created_unix_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
-							 std::chrono::system_clock::now().time_since_epoch())
-							 .count();
-			try {
-				recorder = std::make_shared<LiveRecorder>(c.record.path, header,
-									  static_cast<size_t>(c.record.buffer_frames),
-									  c.record.sync);
-			} catch (const std::runtime_error &e) {
-				throw ConfigError("record.path: " + std::string(e.what()));
-			}
+		if (recorder)
 			built->set_frame_observer([rec = recorder](const StereoFrame &frame) { rec->offer(frame); });
-		}
 		built->start();
 		spdlog::info("streaming on {} ({} workers, ring {} {})", c.output.socket, o.workers, o.ring_capacity,
 			     to_string(o.overflow));
@@ -550,7 +560,27 @@ int run_batch(DaemonConfig config, const BatchOptions &options)
 
 	std::ofstream file;
 	std::ostream *out = &std::cout;
-	if (options.output != "-") {
+	// MCAP output: the results channel, and with --images the eyes as JPEG, encoded on the workers (the
+	// observer) and written in frame order with their result (the sink).
+	std::unique_ptr<drivers::McapRecorder> mcap;
+	std::mutex images_mutex;
+	std::map<uint64_t, std::pair<std::string, std::string>> images;
+	if (drivers::is_mcap_path(options.output)) {
+		drivers::RecorderOptions mcap_options;
+		mcap_options.raw = false;
+		mcap_options.images = options.images;
+		mcap_options.results = true;
+		try {
+			mcap = std::make_unique<drivers::McapRecorder>(
+				options.output,
+				drivers::RecordingHeader::stamped_now(info.name, info.description, info.geometry),
+				mcap_options);
+		} catch (const std::runtime_error &e) {
+			throw ConfigError("--output " + std::string(e.what()));
+		}
+	} else if (options.images) {
+		throw ConfigError("--images: only MCAP output (.mcap) carries images");
+	} else if (options.output != "-") {
 		file.open(options.output, std::ios::binary | std::ios::trunc);
 		if (!file)
 			throw ConfigError("--output " + options.output + ": cannot create file");
@@ -570,10 +600,48 @@ int run_batch(DaemonConfig config, const BatchOptions &options)
 
 	PipelineOptions pipeline_opts = pipeline_options(config, info, false);
 	pipeline_opts.overflow = OverflowPolicy::Block; // batch never drops
-	Pipeline pipeline(std::move(source), pipeline_opts,
-			  [out](FrameResult &result) { *out << protocol::frame_message(result) << '\n'; });
+	std::string mcap_error;
+	Pipeline pipeline(std::move(source), pipeline_opts, [&](FrameResult &result) {
+		if (!mcap) {
+			*out << protocol::frame_message(result) << '\n';
+			return;
+		}
+		if (!mcap_error.empty())
+			return;
+		try {
+			std::pair<std::string, std::string> eyes;
+			if (options.images) {
+				std::lock_guard lock(images_mutex);
+				auto it = images.find(result.seq);
+				if (it != images.end()) {
+					eyes = std::move(it->second);
+					images.erase(it);
+				}
+			}
+			if (!eyes.first.empty())
+				mcap->append_image_message(result.t_capture_ns, false, eyes.first, true);
+			if (!eyes.second.empty())
+				mcap->append_image_message(result.t_capture_ns, true, eyes.second, true);
+			mcap->append_result(result.t_capture_ns, protocol::frame_message(result));
+		} catch (const std::exception &e) {
+			mcap_error = e.what(); // reported at the end; the frames go on being processed
+		}
+	});
+	const auto encode_images = [&](const StereoFrame &frame) {
+		std::pair<std::string, std::string> eyes{
+			drivers::McapRecorder::image_message(frame.left, frame.device_ns, "left", 90),
+			frame.right.empty()
+				? std::string()
+				: drivers::McapRecorder::image_message(frame.right, frame.device_ns, "right", 90)};
+		std::lock_guard lock(images_mutex);
+		images[frame.sequence] = std::move(eyes);
+	};
+	if (options.images && !export_truth)
+		pipeline.set_frame_observer(encode_images);
 	if (export_truth) {
 		pipeline.set_frame_observer([&](const StereoFrame &frame) {
+			if (options.images)
+				encode_images(frame);
 			char name[32];
 			std::snprintf(name, sizeof(name), "masks/%06llu.png",
 				      static_cast<unsigned long long>(frame.sequence));
@@ -659,6 +727,18 @@ int run_batch(DaemonConfig config, const BatchOptions &options)
 	if (!interrupted && info.frame_count > 0 && s.frames_captured < info.frame_count)
 		spdlog::warn("the input ended early: {} announced {} frames, {} were read ({} missing)", info.name,
 			     info.frame_count, s.frames_captured, info.frame_count - s.frames_captured);
+	if (mcap) {
+		if (mcap_error.empty()) {
+			try {
+				mcap->finish();
+			} catch (const std::exception &e) {
+				mcap_error = e.what();
+			}
+		}
+		if (!mcap_error.empty())
+			throw ConfigError("--output " + mcap_error);
+		spdlog::info("wrote {} ({} bytes)", options.output, mcap->bytes_written());
+	}
 	if (!*out)
 		throw ConfigError("--output " + options.output + ": write failed");
 	return interrupted ? 130 : 0;

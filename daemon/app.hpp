@@ -14,7 +14,8 @@ namespace stereod::daemon {
 int run_daemon(const DaemonConfig &config, const std::function<DaemonConfig()> &reload = {});
 
 struct BatchOptions {
-	std::string output;    ///< NDJSON file, "-" for standard output
+	std::string output;    ///< NDJSON file, "-" for standard output; MCAP for a .mcap path (docs/mcap.md)
+	bool images = false;   ///< MCAP output: the images too, as JPEG (foxglove.CompressedImage)
 	std::string truth_dir; ///< when set and the source knows the truth: masks and truth.ndjson go here
 	bool progress = true;  ///< a progress bar when standard error is a terminal
 };

@@ -762,7 +762,8 @@ const std::vector<Option> &options()
 				  [](DaemonConfig &c) -> std::vector<std::string> & { return c.output.allow_groups; }));
 		// [record]: live recording beside the stream (daemon/live_recorder.hpp)
 		o.push_back(text("record", "path",
-				 "record every captured frame to this .srec while streaming; empty: off",
+				 "record every captured frame to this file while streaming (.srec, or .mcap: "
+				 "frames, results and optional JPEG images, docs/mcap.md); empty: off",
 				 [](DaemonConfig &c) -> std::string & { return c.record.path; }));
 		o.push_back(number(
 			"record", "buffer_frames",
@@ -770,6 +771,12 @@ const std::vector<Option> &options()
 			[](DaemonConfig &c) -> int & { return c.record.buffer_frames; }, 1, 1024));
 		o.push_back(boolean("record", "sync", "force each frame to the disk before the next (power-cut safe)",
 				    [](DaemonConfig &c) -> bool & { return c.record.sync; }));
+		o.push_back(
+			boolean("record", "images",
+				"MCAP only: also JPEG images (foxglove.CompressedImage) so Foxglove shows the video",
+				[](DaemonConfig &c) -> bool & { return c.record.images; }));
+		o.push_back(boolean("record", "results", "MCAP only: also the processed results (/stereod/frames)",
+				    [](DaemonConfig &c) -> bool & { return c.record.results; }));
 		// [log]
 		o.push_back(text("log", "level", "trace | debug | info | warn | error",
 				 [](DaemonConfig &c) -> std::string & { return c.log.level; },

@@ -44,6 +44,8 @@ struct RecordConfig {
 	std::string path;      ///< live recording (.srec) beside the stream; empty: off
 	int buffer_frames = 8; ///< frames copied and waiting for the disk at most
 	bool sync = false;     ///< force each frame to the disk before the next (slower, power-cut safe)
+	bool images = false;   ///< MCAP: JPEG images beside the raw frames (Foxglove shows them)
+	bool results = true;   ///< MCAP: the processed results too
 };
 
 struct DaemonConfig {

@@ -53,9 +53,14 @@ const std::string &keep_existing(const std::string &path)
 
 } // namespace
 
-LiveRecorder::LiveRecorder(const std::string &path, const drivers::RecordingHeader &header, size_t slots, bool sync)
-	: path_(path), writer_(keep_existing(path), header), sync_(sync), slots_(std::max<size_t>(slots, 1))
+LiveRecorder::LiveRecorder(const std::string &path, const drivers::RecordingHeader &header, size_t slots, bool sync,
+			   const drivers::RecorderOptions &options)
+	: path_(path), writer_(drivers::open_recorder(keep_existing(path), header, options)), sync_(sync),
+	  slots_(std::max<size_t>(slots, 1))
 {
+	records_results_ = writer_->records_results();
+	results_.reserve(slots_.size() * 4);
+	writing_.reserve(slots_.size() * 4);
 	for (size_t i = 0; i < slots_.size(); ++i) {
 		slots_[i].allocate(header.geometry);
 		free_.push_back(i);
@@ -73,6 +78,15 @@ LiveRecorder::~LiveRecorder()
 	}
 	queued_cv_.notify_all();
 	thread_.join();
+	if (!failed_) {
+		try {
+			writer_->finish(); // MCAP's summary and footer; a file cut before them still reads
+		} catch (const std::exception &e) {
+			failed_ = true;
+			error_ = e.what();
+		}
+		bytes_ = writer_->bytes_written();
+	}
 	const auto s = stats();
 	spdlog::info("recording {}: {} frames, {} bytes{}{}", path_, s.frames, s.bytes,
 		     s.dropped > 0 ? ", " + std::to_string(s.dropped) + " frames not recorded (disk too slow)" : "",
@@ -107,7 +121,30 @@ void LiveRecorder::write_loop()
 	for (;;) {
 		// Workers finish frames a little out of order: wait briefly for a second frame so that the file is
 		// in sequence order within that window.
-		queued_cv_.wait(lock, [&] { return stopping_ || !queued_.empty(); });
+		queued_cv_.wait(lock, [&] { return stopping_ || !queued_.empty() || !results_.empty(); });
+		if (!results_.empty()) {
+			writing_.swap(results_);
+			const bool failed = failed_;
+			lock.unlock();
+			std::string error;
+			try {
+				for (const auto &[t, message] : writing_)
+					if (!failed)
+						writer_->append_result(t, message);
+			} catch (const std::exception &e) {
+				error = e.what();
+			}
+			writing_.clear();
+			lock.lock();
+			if (!error.empty() && !failed_) {
+				failed_ = true;
+				error_ = error;
+				spdlog::error("recording stopped: {} (everything complete before is kept in {}); the "
+					      "stream goes on",
+					      error, path_);
+			}
+			continue;
+		}
 		if (queued_.empty() && stopping_)
 			return;
 		if (queued_.size() < 2 && !stopping_)
@@ -123,7 +160,7 @@ void LiveRecorder::write_loop()
 		std::string error;
 		if (!failed) {
 			try {
-				writer_.append(slots_[slot], sync_);
+				writer_->append(slots_[slot], sync_);
 			} catch (const std::exception &e) {
 				error = e.what();
 			}
@@ -134,11 +171,28 @@ void LiveRecorder::write_loop()
 			failed_ = true;
 			error_ = error;
 			spdlog::error("recording stopped: {} ({} complete frames kept in {}); the stream goes on",
-				      error, writer_.frames_written(), path_);
+				      error, writer_->frames_written(), path_);
 		}
-		frames_ = writer_.frames_written();
-		bytes_ = writer_.bytes_written();
+		frames_ = writer_->frames_written();
+		bytes_ = writer_->bytes_written();
 	}
+}
+
+void LiveRecorder::offer_result(int64_t t_capture_ns, std::string message)
+{
+	if (!records_results_)
+		return;
+	{
+		std::lock_guard lock(mutex_);
+		if (failed_ || stopping_)
+			return;
+		if (results_.size() >= slots_.size() * 4) {
+			dropped_.fetch_add(1);
+			return;
+		}
+		results_.emplace_back(t_capture_ns, std::move(message));
+	}
+	queued_cv_.notify_one();
 }
 
 protocol::StatusReport::Recording LiveRecorder::stats() const

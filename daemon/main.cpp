@@ -29,11 +29,15 @@ int main(int argc, char **argv)
 	std::string input, format = "auto";
 	daemon::BatchOptions batch;
 	bool no_progress = false;
-	process->add_option("-i,--input", input, "recording (.srec), dataset folder or video file")->required();
+	process->add_option("-i,--input", input, "recording (.srec, .mcap), dataset folder or video file")->required();
 	process->add_option(
 		"-f,--format", format,
 		"auto | recording | video | kitti | euroc | tum | folder | sim (auto guesses from the path)");
-	process->add_option("-o,--output", batch.output, "NDJSON output file, - for standard output")->required();
+	process->add_option("-o,--output", batch.output,
+			    "results: NDJSON file, - for standard output, or MCAP for a .mcap path")
+		->required();
+	process->add_flag("--images", batch.images,
+			  "MCAP output: the images too, as JPEG (foxglove.CompressedImage), so Foxglove shows them");
 	process->add_option("--truth-dir", batch.truth_dir, "write the source's ground truth (sim) here");
 	process->add_flag("--no-progress", no_progress, "no progress bar");
 	process->fallthrough(); // --config and --set work after `process` too

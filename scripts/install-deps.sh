@@ -32,6 +32,11 @@ if $test_beds; then
   packages+=(systemd debootstrap systemd-container)
   # fuzzing the parsers of outside bytes: clang's libFuzzer (tests/fuzz)
   packages+=(clang libclang-rt-14-dev)
+  # an independent MCAP reader for the MCAP tests: Foxglove's @mcap/core from npm (tests/mcap); Debian's
+  # Node.js where the machine has none
+  if ! command -v node >/dev/null || ! command -v npm >/dev/null; then
+    packages+=(nodejs npm)
+  fi
 fi
 
 missing=()
@@ -53,6 +58,12 @@ else
 fi
 
 $test_beds || exit 0
+# The MCAP tests' reader, at the version package-lock.json pins (npm is reachable from CI; never the daemon's).
+mcap_dir="$(cd "$(dirname "$0")/.." && pwd)/tests/mcap"
+if [ ! -d "$mcap_dir/node_modules/@mcap/core" ] || [ "$mcap_dir/package-lock.json" -nt "$mcap_dir/node_modules" ]; then
+  echo "install-deps: npm ci in tests/mcap (@mcap/core, the independent MCAP reader)"
+  (cd "$mcap_dir" && npm ci --no-audit --no-fund --loglevel=error)
+fi
 # The V4L2 test bed builds v4l2loopback for the kernel it boots (Debian's current one), so it needs that
 # kernel's headers; which version that is, only apt can say.
 kver=$(apt-cache depends linux-image-amd64 2>/dev/null | sed -n 's/.*Depends: linux-image-//p' | head -1)

@@ -22,7 +22,7 @@
 #include "core/clock.hpp"
 #include "core/protocol.hpp"
 #include "daemon/socket_server.hpp"
-#include "drivers/replay/recording.hpp"
+#include "drivers/replay/mcap_recording.hpp"
 #include "tools/common.hpp"
 #include "tools/evaluation.hpp"
 #include "tools/group_eval.hpp"
@@ -135,21 +135,23 @@ int watch(const std::string &socket_path, bool raw, long max_frames, double time
 
 // --------------------------------------------------------------------------------------------- record
 int record(const tools::SourceOptions &options, const std::string &output, uint64_t max_frames, double seconds,
-	   bool sync)
+	   bool sync, bool images)
 {
 	auto source = tools::open_source(options);
 	const auto &info = source->info();
 	StereoFrame frame;
 	frame.allocate(info.geometry);
-	drivers::RecordingHeader header{info.name, info.description, info.geometry, 0};
-	header.created_unix_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
-					 std::chrono::system_clock::now().time_since_epoch())
-					 .count();
-	drivers::RecordingWriter writer(output, header);
+	if (images && !drivers::is_mcap_path(output))
+		throw std::runtime_error("--images: only MCAP recordings (.mcap) carry JPEG images");
+	drivers::RecorderOptions recorder_options;
+	recorder_options.images = images;
+	const auto writer = drivers::open_recorder(
+		output, drivers::RecordingHeader::stamped_now(info.name, info.description, info.geometry),
+		recorder_options);
 	catch_interrupts();
 	const int64_t start = monotonic_ns();
 	while (!g_interrupted) {
-		if (max_frames > 0 && writer.frames_written() >= max_frames)
+		if (max_frames > 0 && writer->frames_written() >= max_frames)
 			break;
 		if (seconds > 0 && static_cast<double>(monotonic_ns() - start) * 1e-9 >= seconds)
 			break;
@@ -165,35 +167,11 @@ int record(const tools::SourceOptions &options, const std::string &output, uint6
 		}
 		if (status != drivers::GrabStatus::Frame)
 			continue;
-		writer.append(frame, sync);
+		writer->append(frame, sync);
 	}
-	std::cerr << "stereoctl record: " << writer.frames_written() << " frames, " << writer.bytes_written()
+	writer->finish();
+	std::cerr << "stereoctl record: " << writer->frames_written() << " frames, " << writer->bytes_written()
 		  << " bytes to " << output << "\n";
-	return 0;
-}
-
-// ----------------------------------------------------------------------------------------------- info
-int info(const std::string &path)
-{
-	drivers::RecordingReader reader(path);
-	const auto &h = reader.header();
-	std::cout << path << ": recorded from " << h.source << " (" << h.description << ")\n"
-		  << "  " << h.geometry.width << "x" << h.geometry.height << " " << to_string(h.geometry.format)
-		  << (h.geometry.stereo ? " stereo" : " mono") << (h.geometry.depth ? " +depth" : "")
-		  << (h.geometry.truth ? " +truth" : "") << ", nominal " << h.geometry.nominal_fps << " fps\n";
-	StereoFrame frame;
-	frame.allocate(h.geometry);
-	int64_t first = 0, last = 0;
-	uint64_t n = 0;
-	while (reader.next(frame)) {
-		if (n++ == 0)
-			first = frame.device_ns;
-		last = frame.device_ns;
-	}
-	std::cout << "  " << reader.report().describe() << "\n";
-	if (n > 1)
-		std::cout << "  span " << static_cast<double>(last - first) * 1e-9 << " s, "
-			  << static_cast<double>(n - 1) / (static_cast<double>(last - first) * 1e-9) << " fps\n";
 	return 0;
 }
 
@@ -576,22 +554,23 @@ int main(int argc, char **argv)
 	watch_cmd->add_option("-n,--count", max_frames, "exit after this many frame messages");
 	watch_cmd->add_option("--timeout", timeout_s, "give up after this many seconds without data");
 
-	auto *record_cmd = app.add_subcommand("record", "record any source to a .srec file");
+	auto *record_cmd = app.add_subcommand("record", "record any source to a .srec or MCAP (.mcap) file");
 	tools::SourceOptions record_opts;
 	record_opts.realtime = true;
 	std::string record_out;
 	uint64_t record_frames = 0;
 	double record_seconds = 0;
-	bool record_sync = false;
+	bool record_sync = false, record_images = false;
 	add_source_options(*record_cmd, record_opts);
-	record_cmd->add_option("-o,--output", record_out, "recording to write (.srec)")->required();
+	record_cmd->add_option("-o,--output", record_out, "recording to write (.srec, or .mcap: docs/mcap.md)")
+		->required();
+	record_cmd->add_flag("--images", record_images,
+			     "MCAP: also the eyes as JPEG (foxglove.CompressedImage), so Foxglove shows the video");
 	record_cmd->add_option("-n,--frames", record_frames, "stop after this many frames");
 	record_cmd->add_option("-t,--seconds", record_seconds, "stop after this many seconds");
 	record_cmd->add_flag("--sync", record_sync, "flush every frame to the disk before the next");
 
-	auto *info_cmd = app.add_subcommand("info", "describe a recording and check every record");
-	std::string info_path;
-	info_cmd->add_option("recording", info_path, "a .srec file")->required();
+	tools::add_info_command(app);
 
 	auto *eval_cmd = app.add_subcommand("eval", "score labelled points against ground-truth masks");
 	std::string eval_results, eval_truth, eval_name = "run", eval_csv;
@@ -655,9 +634,8 @@ int main(int argc, char **argv)
 			return watch(socket_path, raw, max_frames, timeout_s);
 		}
 		if (*record_cmd)
-			return record(record_opts, record_out, record_frames, record_seconds, record_sync);
-		if (*info_cmd)
-			return info(info_path);
+			return record(record_opts, record_out, record_frames, record_seconds, record_sync,
+				      record_images);
 		if (*eval_cmd) {
 			if (eval_truth.empty() && trajectory.poses.empty()) {
 				std::cerr << "stereoctl eval: give --truth (labels), --poses (trajectory), or both\n";

@@ -10,7 +10,7 @@
 #include <CLI/CLI.hpp>
 #include <opencv2/imgcodecs.hpp>
 
-#include "drivers/replay/recording.hpp"
+#include "drivers/replay/mcap_recording.hpp"
 #include "tools/subcommands.hpp"
 
 namespace stereod::tools {
@@ -31,8 +31,8 @@ std::string kitti_time(int64_t ns)
 
 int export_recording(const std::string &input, const std::string &output, const std::string &layout)
 {
-	drivers::RecordingReader reader(input);
-	const auto &h = reader.header();
+	const auto reader = drivers::open_recording(input);
+	const auto &h = reader->recording_header();
 	const bool kitti = layout == "kitti";
 	const fs::path root(output);
 	const fs::path left_dir = kitti ? root / "image_02" / "data" : root / "left";
@@ -50,7 +50,7 @@ int export_recording(const std::string &input, const std::string &output, const 
 	StereoFrame frame;
 	frame.allocate(h.geometry);
 	uint64_t n = 0, not_ok = 0;
-	while (reader.next(frame)) {
+	while (reader->next_frame(frame)) {
 		char name[32];
 		std::snprintf(name, sizeof(name), kitti ? "%010llu.png" : "%06llu.png",
 			      static_cast<unsigned long long>(n));
@@ -74,7 +74,7 @@ int export_recording(const std::string &input, const std::string &output, const 
 	std::cerr << "stereoctl export: " << n << " frames -> " << output << " (" << layout << "); ";
 	if (not_ok > 0)
 		std::cerr << not_ok << " of them incomplete or corrupt (status.txt); ";
-	std::cerr << reader.report().describe() << "\n";
+	std::cerr << reader->describe_end() << "\n";
 	if (!left_stamps || !statuses)
 		throw std::runtime_error(output + ": cannot write timestamps");
 	return n > 0 ? 0 : 1;
@@ -89,7 +89,7 @@ void add_export_command(CLI::App &app)
 		std::string input, output, layout = "pairs";
 	};
 	auto options = std::make_shared<Options>();
-	cmd->add_option("recording", options->input, "a .srec file")->required();
+	cmd->add_option("recording", options->input, "a .srec or .mcap recording")->required();
 	cmd->add_option("-o,--output", options->output, "folder to write")->required();
 	cmd->add_option("--layout", options->layout, "pairs (left/, right/: the folder source) | kitti")
 		->check(CLI::IsMember({"pairs", "kitti"}));

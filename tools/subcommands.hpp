@@ -13,6 +13,8 @@ namespace stereod::tools {
 void add_devices_command(CLI::App &app);
 /// `stereoctl calibrate`: a stereo calibration from chessboard pairs (OpenCV YAML/XML for calibration.file).
 void add_calibrate_command(CLI::App &app);
+/// `stereoctl info`: what a recording (.srec or MCAP) holds, every record checked.
+void add_info_command(CLI::App &app);
 /// `stereoctl export`: a recording to PNG pairs (the `folder` layout) or a KITTI raw-data drive folder.
 void add_export_command(CLI::App &app);
 /// `stereoctl map`: the static scene, movers left out, as a PLY point cloud (issue 15's static map).

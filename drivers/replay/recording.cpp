@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <chrono>
 #include <cstring>
 #include <fcntl.h>
 #include <stdexcept>
@@ -57,21 +58,157 @@ void put_image(std::vector<uint8_t> &out, ImageRole role, const cv::Mat &image)
 		out.insert(out.end(), image.ptr<uint8_t>(y), image.ptr<uint8_t>(y) + row_bytes);
 }
 
-nlohmann::json header_json(const RecordingHeader &h)
+} // namespace
+
+RecordingHeader RecordingHeader::stamped_now(std::string source, std::string description, const FrameGeometry &geometry)
 {
-	return {{"source", h.source},
-		{"description", h.description},
-		{"width", h.geometry.width},
-		{"height", h.geometry.height},
-		{"format", to_string(h.geometry.format)},
-		{"stereo", h.geometry.stereo},
-		{"depth", h.geometry.depth},
-		{"truth", h.geometry.truth},
-		{"nominal_fps", h.geometry.nominal_fps},
-		{"created_unix_ns", h.created_unix_ns}};
+	RecordingHeader h{std::move(source), std::move(description), geometry, 0};
+	h.created_unix_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(
+				    std::chrono::system_clock::now().time_since_epoch())
+				    .count();
+	return h;
 }
 
-} // namespace
+std::string recording_header_json(const RecordingHeader &h)
+{
+	return nlohmann::json{{"source", h.source},
+			      {"description", h.description},
+			      {"width", h.geometry.width},
+			      {"height", h.geometry.height},
+			      {"format", to_string(h.geometry.format)},
+			      {"stereo", h.geometry.stereo},
+			      {"depth", h.geometry.depth},
+			      {"truth", h.geometry.truth},
+			      {"nominal_fps", h.geometry.nominal_fps},
+			      {"created_unix_ns", h.created_unix_ns}}
+		.dump();
+}
+
+RecordingHeader parse_recording_header(const std::string &json)
+{
+	RecordingHeader header;
+	const auto j = nlohmann::json::parse(json);
+	header.source = j.at("source").get<std::string>();
+	header.description = j.value("description", "");
+	// Sizes as 64-bit integers first: a float or a huge number converted straight to int is undefined.
+	const auto side = [&j](const char *key) {
+		const auto &v = j.at(key);
+		if (!v.is_number_integer())
+			throw std::runtime_error(std::string(key) + " is not an integer");
+		const auto n = v.get<int64_t>();
+		return static_cast<int>(std::clamp<int64_t>(n, -1, int64_t{1} << 30));
+	};
+	header.geometry.width = side("width");
+	header.geometry.height = side("height");
+	const auto format = j.at("format").get<std::string>();
+	if (format == "mono8")
+		header.geometry.format = PixelFormat::Mono8;
+	else if (format == "bgr8")
+		header.geometry.format = PixelFormat::Bgr8;
+	else
+		throw std::runtime_error("unknown pixel format '" + format + "'");
+	header.geometry.stereo = j.at("stereo").get<bool>();
+	header.geometry.depth = j.at("depth").get<bool>();
+	header.geometry.truth = j.at("truth").get<bool>();
+	header.geometry.nominal_fps =
+		j.contains("nominal_fps") && j.at("nominal_fps").is_number() ? j.at("nominal_fps").get<double>() : 0.0;
+	header.created_unix_ns = j.contains("created_unix_ns") && j.at("created_unix_ns").is_number_integer()
+					 ? j.at("created_unix_ns").get<int64_t>()
+					 : 0;
+	// A reader's caller allocates frames of this geometry: refuse what no camera makes before it does.
+	constexpr int kMaxSide = 16384;
+	const auto &g = header.geometry;
+	if (g.width < 1 || g.height < 1 || g.width > kMaxSide || g.height > kMaxSide)
+		throw std::runtime_error("implausible image size " + std::to_string(g.width) + "x" +
+					 std::to_string(g.height) + " (1 to " + std::to_string(kMaxSide) + " a side)");
+	return header;
+}
+
+void encode_frame(const StereoFrame &frame, const FrameGeometry &geometry, std::vector<uint8_t> &out)
+{
+	put<uint64_t>(out, frame.sequence);
+	put<int64_t>(out, frame.device_ns);
+	put<int64_t>(out, frame.host_ns);
+	put<int64_t>(out, frame.lr_skew_ns);
+	put<uint8_t>(out, static_cast<uint8_t>(frame.status));
+	const uint8_t images = static_cast<uint8_t>(1 + (geometry.stereo ? 1 : 0) + (geometry.depth ? 1 : 0) +
+						    (geometry.truth ? 1 : 0));
+	put<uint8_t>(out, images);
+	put<uint16_t>(out, 0);
+	if (geometry.truth) {
+		for (double value : frame.truth.camera_pose)
+			put<double>(out, value);
+		put<uint32_t>(out, static_cast<uint32_t>(frame.truth.object_count));
+		for (size_t i = 0; i < frame.truth.object_count; ++i) {
+			const ObjectTruth &object = frame.truth.objects[i];
+			put<uint16_t>(out, object.id);
+			for (double v : object.position_m)
+				put<double>(out, v);
+			for (double v : object.velocity_mps)
+				put<double>(out, v);
+		}
+	}
+	put_image(out, ImageRole::Left, frame.left);
+	if (geometry.stereo)
+		put_image(out, ImageRole::Right, frame.right);
+	if (geometry.depth)
+		put_image(out, ImageRole::Depth, frame.depth);
+	if (geometry.truth)
+		put_image(out, ImageRole::ObjectIds, frame.truth.object_ids);
+}
+
+void decode_frame(const uint8_t *data, size_t size, const FrameGeometry &geometry, StereoFrame &into)
+{
+	const uint8_t *cursor = data;
+	const uint8_t *end = data + size;
+	into.sequence = get<uint64_t>(cursor, end);
+	into.device_ns = get<int64_t>(cursor, end);
+	into.host_ns = get<int64_t>(cursor, end);
+	into.lr_skew_ns = get<int64_t>(cursor, end);
+	const auto status = get<uint8_t>(cursor, end);
+	if (status > static_cast<uint8_t>(FrameStatus::Corrupt))
+		throw std::runtime_error("bad frame status");
+	into.status = static_cast<FrameStatus>(status);
+	const auto images = get<uint8_t>(cursor, end);
+	(void)get<uint16_t>(cursor, end);
+	into.truth.object_count = 0;
+	if (geometry.truth) {
+		for (double &value : into.truth.camera_pose)
+			value = get<double>(cursor, end);
+		const auto count = get<uint32_t>(cursor, end);
+		if (count > FrameTruth::kMaxObjects)
+			throw std::runtime_error("too many truth objects");
+		for (uint32_t i = 0; i < count; ++i) {
+			ObjectTruth &object = into.truth.objects[i];
+			object.id = get<uint16_t>(cursor, end);
+			for (double &v : object.position_m)
+				v = get<double>(cursor, end);
+			for (double &v : object.velocity_mps)
+				v = get<double>(cursor, end);
+		}
+		into.truth.object_count = count;
+	}
+	for (uint8_t i = 0; i < images; ++i) {
+		const auto role = get<uint8_t>(cursor, end);
+		(void)get<uint8_t>(cursor, end);
+		const auto type = get<uint16_t>(cursor, end);
+		const auto rows = get<uint32_t>(cursor, end);
+		const auto cols = get<uint32_t>(cursor, end);
+		cv::Mat *target = role == 0   ? &into.left
+				  : role == 1 ? &into.right
+				  : role == 2 ? &into.depth
+				  : role == 3 ? &into.truth.object_ids
+					      : nullptr;
+		if (!target || target->empty() || target->type() != type || target->rows != static_cast<int>(rows) ||
+		    target->cols != static_cast<int>(cols))
+			throw std::runtime_error("image does not match the header's geometry");
+		const size_t row_bytes = static_cast<size_t>(cols) * target->elemSize();
+		if (static_cast<size_t>(end - cursor) < row_bytes * rows)
+			throw std::runtime_error("image data cut short");
+		for (uint32_t y = 0; y < rows; ++y, cursor += row_bytes)
+			std::memcpy(target->ptr<uint8_t>(static_cast<int>(y)), cursor, row_bytes);
+	}
+}
 
 RecordingWriter::RecordingWriter(const std::string &path, const RecordingHeader &header)
 	: path_(path), geometry_(header.geometry)
@@ -79,7 +216,7 @@ RecordingWriter::RecordingWriter(const std::string &path, const RecordingHeader 
 	fd_ = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_APPEND | O_CLOEXEC, 0644);
 	if (fd_ < 0)
 		throw std::runtime_error(path + ": cannot create recording: " + std::strerror(errno));
-	const std::string json = header_json(header).dump();
+	const std::string json = recording_header_json(header);
 	std::vector<uint8_t> head(kMagic, kMagic + sizeof(kMagic));
 	put<uint32_t>(head, kVersion);
 	put<uint32_t>(head, static_cast<uint32_t>(json.size()));
@@ -116,36 +253,7 @@ void RecordingWriter::append(const StereoFrame &frame, bool sync)
 {
 	buffer_.clear();
 	buffer_.resize(kRecordHeaderSize); // filled in below, once the payload is known
-	put<uint64_t>(buffer_, frame.sequence);
-	put<int64_t>(buffer_, frame.device_ns);
-	put<int64_t>(buffer_, frame.host_ns);
-	put<int64_t>(buffer_, frame.lr_skew_ns);
-	put<uint8_t>(buffer_, static_cast<uint8_t>(frame.status));
-	const uint8_t images = static_cast<uint8_t>(1 + (geometry_.stereo ? 1 : 0) + (geometry_.depth ? 1 : 0) +
-						    (geometry_.truth ? 1 : 0));
-	put<uint8_t>(buffer_, images);
-	put<uint16_t>(buffer_, 0);
-	if (geometry_.truth) {
-		for (double value : frame.truth.camera_pose)
-			put<double>(buffer_, value);
-		put<uint32_t>(buffer_, static_cast<uint32_t>(frame.truth.object_count));
-		for (size_t i = 0; i < frame.truth.object_count; ++i) {
-			const ObjectTruth &object = frame.truth.objects[i];
-			put<uint16_t>(buffer_, object.id);
-			for (double v : object.position_m)
-				put<double>(buffer_, v);
-			for (double v : object.velocity_mps)
-				put<double>(buffer_, v);
-		}
-	}
-	put_image(buffer_, ImageRole::Left, frame.left);
-	if (geometry_.stereo)
-		put_image(buffer_, ImageRole::Right, frame.right);
-	if (geometry_.depth)
-		put_image(buffer_, ImageRole::Depth, frame.depth);
-	if (geometry_.truth)
-		put_image(buffer_, ImageRole::ObjectIds, frame.truth.object_ids);
-
+	encode_frame(frame, geometry_, buffer_);
 	const size_t payload = buffer_.size() - kRecordHeaderSize;
 	const uint32_t header[3] = {kRecordMagic, static_cast<uint32_t>(payload),
 				    crc32_of(buffer_.data() + kRecordHeaderSize, payload)};
@@ -208,45 +316,10 @@ void RecordingReader::read_header()
 	if (crc != crc32_of(reinterpret_cast<const uint8_t *>(json.data()), json.size()))
 		throw std::runtime_error(path + ": recording header fails its CRC");
 	try {
-		const auto j = nlohmann::json::parse(json);
-		header_.source = j.at("source").get<std::string>();
-		header_.description = j.value("description", "");
-		// Sizes as 64-bit integers first: a float or a huge number converted straight to int is undefined.
-		const auto side = [&j](const char *key) {
-			const auto &v = j.at(key);
-			if (!v.is_number_integer())
-				throw std::runtime_error(std::string(key) + " is not an integer");
-			const auto n = v.get<int64_t>();
-			return static_cast<int>(std::clamp<int64_t>(n, -1, int64_t{1} << 30));
-		};
-		header_.geometry.width = side("width");
-		header_.geometry.height = side("height");
-		const auto format = j.at("format").get<std::string>();
-		if (format == "mono8")
-			header_.geometry.format = PixelFormat::Mono8;
-		else if (format == "bgr8")
-			header_.geometry.format = PixelFormat::Bgr8;
-		else
-			throw std::runtime_error("unknown pixel format '" + format + "'");
-		header_.geometry.stereo = j.at("stereo").get<bool>();
-		header_.geometry.depth = j.at("depth").get<bool>();
-		header_.geometry.truth = j.at("truth").get<bool>();
-		header_.geometry.nominal_fps = j.contains("nominal_fps") && j.at("nominal_fps").is_number()
-						       ? j.at("nominal_fps").get<double>()
-						       : 0.0;
-		header_.created_unix_ns = j.contains("created_unix_ns") && j.at("created_unix_ns").is_number_integer()
-						  ? j.at("created_unix_ns").get<int64_t>()
-						  : 0;
+		header_ = parse_recording_header(json);
 	} catch (const std::exception &e) {
 		throw std::runtime_error(path + ": bad recording header: " + e.what());
 	}
-	// A reader's caller allocates frames of this geometry: refuse what no camera makes before it does.
-	constexpr int kMaxSide = 16384;
-	const auto &g = header_.geometry;
-	if (g.width < 1 || g.height < 1 || g.width > kMaxSide || g.height > kMaxSide)
-		throw std::runtime_error(path + ": bad recording header: implausible image size " +
-					 std::to_string(g.width) + "x" + std::to_string(g.height) + " (1 to " +
-					 std::to_string(kMaxSide) + " a side)");
 	offset_ = sizeof(kMagic) + 8 + json.size() + 4;
 }
 
@@ -297,55 +370,7 @@ bool RecordingReader::next(StereoFrame &into)
 		return fail("record fails its CRC");
 
 	try {
-		const uint8_t *cursor = buffer_.data();
-		const uint8_t *end = cursor + buffer_.size();
-		into.sequence = get<uint64_t>(cursor, end);
-		into.device_ns = get<int64_t>(cursor, end);
-		into.host_ns = get<int64_t>(cursor, end);
-		into.lr_skew_ns = get<int64_t>(cursor, end);
-		const auto status = get<uint8_t>(cursor, end);
-		if (status > static_cast<uint8_t>(FrameStatus::Corrupt))
-			throw std::runtime_error("bad frame status");
-		into.status = static_cast<FrameStatus>(status);
-		const auto images = get<uint8_t>(cursor, end);
-		(void)get<uint16_t>(cursor, end);
-		into.truth.object_count = 0;
-		if (header_.geometry.truth) {
-			for (double &value : into.truth.camera_pose)
-				value = get<double>(cursor, end);
-			const auto count = get<uint32_t>(cursor, end);
-			if (count > FrameTruth::kMaxObjects)
-				throw std::runtime_error("too many truth objects");
-			for (uint32_t i = 0; i < count; ++i) {
-				ObjectTruth &object = into.truth.objects[i];
-				object.id = get<uint16_t>(cursor, end);
-				for (double &v : object.position_m)
-					v = get<double>(cursor, end);
-				for (double &v : object.velocity_mps)
-					v = get<double>(cursor, end);
-			}
-			into.truth.object_count = count;
-		}
-		for (uint8_t i = 0; i < images; ++i) {
-			const auto role = get<uint8_t>(cursor, end);
-			(void)get<uint8_t>(cursor, end);
-			const auto type = get<uint16_t>(cursor, end);
-			const auto rows = get<uint32_t>(cursor, end);
-			const auto cols = get<uint32_t>(cursor, end);
-			cv::Mat *target = role == 0   ? &into.left
-					  : role == 1 ? &into.right
-					  : role == 2 ? &into.depth
-					  : role == 3 ? &into.truth.object_ids
-						      : nullptr;
-			if (!target || target->empty() || target->type() != type ||
-			    target->rows != static_cast<int>(rows) || target->cols != static_cast<int>(cols))
-				throw std::runtime_error("image does not match the header's geometry");
-			const size_t row_bytes = static_cast<size_t>(cols) * target->elemSize();
-			if (static_cast<size_t>(end - cursor) < row_bytes * rows)
-				throw std::runtime_error("image data cut short");
-			for (uint32_t y = 0; y < rows; ++y, cursor += row_bytes)
-				std::memcpy(target->ptr<uint8_t>(static_cast<int>(y)), cursor, row_bytes);
-		}
+		decode_frame(buffer_.data(), buffer_.size(), header_.geometry, into);
 	} catch (const std::exception &e) {
 		return fail(std::string("record is malformed: ") + e.what());
 	}

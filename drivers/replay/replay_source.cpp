@@ -1,4 +1,4 @@
-// The `replay` driver: plays a .srec recording.
+// The `replay` driver: plays a recording, .srec or MCAP (drivers/replay/mcap_recording.hpp).
 #include "core/clock.hpp"
 #include "drivers/builtin.hpp"
 #include "drivers/replay/pacer.hpp"
@@ -15,11 +15,11 @@ public:
 		if (config.path.empty())
 			throw SourceError("replay: no recording given (source.path)");
 		try {
-			reader_ = std::make_unique<RecordingReader>(config.path);
+			reader_ = open_recording(config.path);
 		} catch (const std::exception &e) {
 			throw SourceError(e.what());
 		}
-		const RecordingHeader &header = reader_->header();
+		const RecordingHeader &header = reader_->recording_header();
 		info_.name = "replay";
 		info_.description = config.path + " (recorded from " + header.source + ": " + header.description + ")";
 		info_.geometry = header.geometry;
@@ -30,7 +30,7 @@ public:
 
 	GrabStatus grab(StereoFrame &into) override
 	{
-		if (!reader_->next(into))
+		if (!reader_->next_frame(into))
 			return GrabStatus::EndOfStream;
 		if (!pacer_.wait_for(into.device_ns))
 			return GrabStatus::EndOfStream;
@@ -38,10 +38,10 @@ public:
 		return GrabStatus::Frame;
 	}
 
-	std::vector<std::string> report() const override { return {"replay: " + reader_->report().describe()}; }
+	std::vector<std::string> report() const override { return {"replay: " + reader_->describe_end()}; }
 
 private:
-	std::unique_ptr<RecordingReader> reader_;
+	std::unique_ptr<FrameRecordingReader> reader_;
 	Pacer pacer_;
 	SourceInfo info_;
 };
@@ -50,7 +50,7 @@ private:
 
 void register_replay(SourceRegistry &registry)
 {
-	registry.add("replay", "a stereod recording (.srec)",
+	registry.add("replay", "a stereod recording (.srec or .mcap)",
 		     [](const SourceConfig &config) { return std::make_unique<ReplaySource>(config); });
 }
 

@@ -12,7 +12,7 @@ SECONDS_EACH=${2:-30}
 HERE=$(cd "$(dirname "$0")" && pwd)
 WORK=$(mktemp -d /tmp/stereod-fuzz.XXXXXX)
 failed=()
-for target in fuzz_config fuzz_recording fuzz_frame_message fuzz_kitti_calib; do
+for target in fuzz_config fuzz_recording fuzz_mcap fuzz_frame_message fuzz_kitti_calib; do
 	exe=$BUILD/tests/fuzz/$target
 	[ -x "$exe" ] || { echo "FAIL: $exe not built"; exit 1; }
 	mkdir -p "$WORK/$target/corpus" "$WORK/$target/artifacts"
@@ -21,6 +21,7 @@ for target in fuzz_config fuzz_recording fuzz_frame_message fuzz_kitti_calib; do
 	case $target in
 	fuzz_config) runs=8000 ;;
 	fuzz_recording) runs=20000 ;;
+	fuzz_mcap) runs=60000 ;;
 	fuzz_frame_message) runs=400000 ;;
 	fuzz_kitti_calib) runs=150000 ;;
 	esac
