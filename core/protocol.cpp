@@ -381,6 +381,16 @@ std::string status_message(const StatusReport &status)
 		if (!r.error.empty())
 			message["recording"]["error"] = r.error;
 	}
+	if (status.dds) {
+		const auto &d = *status.dds;
+		message["dds"] = {{"name", d.name},
+				  {"domain", d.domain},
+				  {"frames_published", d.frames_published},
+				  {"frames_dropped", d.frames_dropped},
+				  {"write_errors", d.write_errors},
+				  {"publish_ms_mean", round_to(d.publish_ms_mean, 0.001)},
+				  {"publish_ms_max", round_to(d.publish_ms_max, 0.001)}};
+	}
 	return message.dump();
 }
 

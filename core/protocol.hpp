@@ -63,6 +63,17 @@ struct StatusReport {
 		uint64_t dropped = 0; ///< frames not recorded: the disk was slower than the camera
 	};
 	std::optional<Recording> recording;
+	/// Publishing on DDS (`[dds] enabled`), when on.
+	struct Dds {
+		std::string name;
+		int domain = 0;
+		uint64_t frames_published = 0;
+		uint64_t frames_dropped = 0; ///< replaced while waiting: DDS slower than the pipeline
+		uint64_t write_errors = 0;
+		double publish_ms_mean = 0; ///< converting and writing one frame's three messages
+		double publish_ms_max = 0;
+	};
+	std::optional<Dds> dds;
 };
 
 std::string status_message(const StatusReport &status);

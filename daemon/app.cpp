@@ -1,4 +1,5 @@
 #include "daemon/app.hpp"
+#include "daemon/dds/dds_publisher.hpp"
 #include "daemon/live_recorder.hpp"
 
 #include <algorithm>
@@ -295,6 +296,16 @@ int run_daemon(const DaemonConfig &initial, const std::function<DaemonConfig()> 
 	auto hello_for = [](const drivers::SourceInfo &info) {
 		return protocol::hello_message(monotonic_ns(), info.name, info.geometry.width, info.geometry.height);
 	};
+	// DDS, when on: made once, before any pipeline (which publishes into it) and outliving them all. Its
+	// options apply at start only.
+	std::unique_ptr<DdsPublisher> dds;
+	if (config.dds.enabled) {
+		try {
+			dds = std::make_unique<DdsPublisher>(config.dds);
+		} catch (const std::runtime_error &e) {
+			throw ConfigError("dds.enabled: " + std::string(e.what()));
+		}
+	}
 	// The source and the pipeline: built at start, and again in place when a reload changes what they use.
 	PipelineOptions options;
 	// The live recording, when on: shared with the pipeline's frame observer, so a pipeline being replaced
@@ -336,7 +347,7 @@ int run_daemon(const DaemonConfig &initial, const std::function<DaemonConfig()> 
 			recorder && recorder->records_results() ? recorder : nullptr;
 		auto built = std::make_unique<Pipeline>(
 			std::move(source), o,
-			[&server, hang_after, &sunk, rec = std::move(result_recorder)](FrameResult &result) {
+			[&server, &dds, hang_after, &sunk, rec = std::move(result_recorder)](FrameResult &result) {
 				if (hang_after > 0 && ++sunk > hang_after) {
 					spdlog::warn("STEREOD_TEST_FAULT: the publisher hangs from frame {} on",
 						     result.seq);
@@ -346,6 +357,8 @@ int run_daemon(const DaemonConfig &initial, const std::function<DaemonConfig()> 
 				std::string message = protocol::frame_message(result);
 				if (rec)
 					rec->offer_result(result.t_capture_ns, message);
+				if (dds)
+					dds->offer(result);
 				server->publish(std::move(message));
 			});
 		if (recorder)
@@ -388,6 +401,13 @@ int run_daemon(const DaemonConfig &initial, const std::function<DaemonConfig()> 
 		auto report = make_status(*pipeline, s, server_stats, start_ns, capture_fps, publish_fps);
 		if (recorder)
 			report.recording = recorder->stats();
+		if (dds) {
+			const auto d = dds->stats();
+			report.dds = protocol::StatusReport::Dds{
+				config.dds.name, config.dds.domain, d.frames_published, d.frames_dropped,
+				d.write_errors,	 d.publish_ms_mean, d.publish_ms_max};
+			dds->offer_status(report);
+		}
 		server->publish(protocol::status_message(report));
 		uint64_t frames_dropped = 0;
 		for (const auto &[name, count] : report.drops)
@@ -428,6 +448,9 @@ int run_daemon(const DaemonConfig &initial, const std::function<DaemonConfig()> 
 						     config.output.socket);
 					next.output.socket = config.output.socket;
 				}
+				if (!(next.dds == config.dds))
+					spdlog::warn("reload: dds.* changes only with a restart; still as started");
+				next.dds = config.dds;
 				const SocketServerOptions next_server = server_options(next.output); // may refuse
 				const std::vector<std::string> changed = changed_options(config, next);
 				const bool rebuild = std::any_of(changed.begin(), changed.end(),

@@ -1,6 +1,7 @@
 #include "daemon/config.hpp"
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -777,6 +778,30 @@ const std::vector<Option> &options()
 				[](DaemonConfig &c) -> bool & { return c.record.images; }));
 		o.push_back(boolean("record", "results", "MCAP only: also the processed results (/stereod/frames)",
 				    [](DaemonConfig &c) -> bool & { return c.record.results; }));
+		// [dds]: results as ROS 2 messages on DDS (daemon/dds/dds_publisher.hpp, docs/ros2.md)
+		o.push_back(boolean("dds", "enabled",
+				    "publish odom, groups, points and status on DDS as ROS 2 messages (docs/ros2.md)",
+				    [](DaemonConfig &c) -> bool & { return c.dds.enabled; }));
+		o.push_back(number(
+			"dds", "domain", "DDS domain id (ROS_DOMAIN_ID of the ROS 2 machines that listen)",
+			[](DaemonConfig &c) -> int & { return c.dds.domain; }, 0, 232));
+		o.push_back(text("dds", "name",
+				 "this board's name: topics are rt/stereod/<name>/{odom,groups,points,status} "
+				 "(letters, digits, _; not starting with a digit)",
+				 [](DaemonConfig &c) -> std::string & { return c.dds.name; }));
+		o.push_back(text("dds", "qos",
+				 "reliable (ROS 2's default: reliable, keep last 10) | sensor_data (best effort, keep "
+				 "last 5)",
+				 [](DaemonConfig &c) -> std::string & { return c.dds.qos; },
+				 {"reliable", "sensor_data"}));
+		o.push_back(text("dds", "frame_id",
+				 "odom's header.frame_id: the world, which is the first frame's camera",
+				 [](DaemonConfig &c) -> std::string & { return c.dds.frame_id; }));
+		o.push_back(
+			text("dds", "child_frame_id",
+			     "the camera's frame (left rectified, x right, y down, z forward): odom's child, points' "
+			     "and groups' frame",
+			     [](DaemonConfig &c) -> std::string & { return c.dds.child_frame_id; }));
 		// [log]
 		o.push_back(text("log", "level", "trace | debug | info | warn | error",
 				 [](DaemonConfig &c) -> std::string & { return c.log.level; },
@@ -963,6 +988,15 @@ void validate(const DaemonConfig &config, const std::string &origin)
 		throw ConfigError(origin + ": output.socket: longer than " +
 				  std::to_string(sizeof(sockaddr_un::sun_path) - 1) + " bytes (" +
 				  describe_cut(socket) + ")");
+	// A ROS 2 name token: it becomes part of the topic names, which ROS 2 tools must accept.
+	const std::string &name = config.dds.name;
+	const bool name_ok = !name.empty() && !std::isdigit(static_cast<unsigned char>(name[0])) &&
+			     std::all_of(name.begin(), name.end(), [](char ch) {
+				     return std::isalnum(static_cast<unsigned char>(ch)) || ch == '_';
+			     });
+	if (!name_ok)
+		throw ConfigError(origin + ": dds.name: '" + describe_cut(name) +
+				  "' is not a ROS 2 name token (letters, digits and _, not starting with a digit)");
 	const auto &c = config.motion.classifier;
 	if (std::abs(c.alpha + c.beta + c.gamma - 1.0) > 1e-6) {
 		std::ostringstream msg;

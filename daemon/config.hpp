@@ -48,6 +48,17 @@ struct RecordConfig {
 	bool results = true;   ///< MCAP: the processed results too
 };
 
+/// Results on DDS as ROS 2 messages (daemon/dds/dds_publisher.hpp, docs/ros2.md).
+struct DdsConfig {
+	bool enabled = false;
+	int domain = 0;			       ///< DDS domain id (ROS_DOMAIN_ID on the ROS 2 side)
+	std::string name = "front";	       ///< this board's name in the topic names
+	std::string qos = "reliable";	       ///< "reliable" (ROS 2's default) or "sensor_data"
+	std::string frame_id = "odom";	       ///< Odometry's header.frame_id: the first frame's camera
+	std::string child_frame_id = "camera"; ///< the camera (left rectified, optical axes): points, groups, twist
+	bool operator==(const DdsConfig &) const = default;
+};
+
 struct DaemonConfig {
 	drivers::SourceConfig source;
 	CalibrationConfig calibration;
@@ -55,6 +66,7 @@ struct DaemonConfig {
 	vision::MotionParams motion;
 	OutputConfig output;
 	RecordConfig record;
+	DdsConfig dds;
 	LogConfig log;
 };
 

@@ -14,6 +14,8 @@ packages=(
   # libraries the code links against
   libopencv-dev libeigen3-dev libspdlog-dev libfmt-dev nlohmann-json3-dev libcli11-dev libtoml11-dev
   libsystemd-dev zlib1g-dev libgtest-dev libbenchmark-dev
+  # results on DDS as ROS 2 messages (Eclipse Cyclone DDS and its IDL compiler, idlc)
+  cyclonedds-dev cyclonedds-tools
   # camera drivers: GigE / USB3 Vision (Aravis), FireWire (libdc1394), MJPG decoding for V4L2 (libjpeg-turbo)
   libaravis-dev libusb-1.0-0-dev libdc1394-dev libturbojpeg0-dev
   # real photographs for the sim scene's textures and the real-data tests (same files as ../shared/data)

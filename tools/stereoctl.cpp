@@ -615,6 +615,7 @@ int main(int argc, char **argv)
 	tools::add_devices_command(app);
 	tools::add_export_command(app);
 	tools::add_map_command(app);
+	tools::add_fleet_command(app);
 	tools::add_reference_command(app);
 	tools::add_calibrate_command(app);
 

@@ -15,6 +15,8 @@ void add_devices_command(CLI::App &app);
 void add_calibrate_command(CLI::App &app);
 /// `stereoctl info`: what a recording (.srec or MCAP) holds, every record checked.
 void add_info_command(CLI::App &app);
+/// `stereoctl fleet`: every stereod on a DDS domain, one line per board, found by DDS discovery.
+void add_fleet_command(CLI::App &app);
 /// `stereoctl export`: a recording to PNG pairs (the `folder` layout) or a KITTI raw-data drive folder.
 void add_export_command(CLI::App &app);
 /// `stereoctl map`: the static scene, movers left out, as a PLY point cloud (issue 15's static map).
