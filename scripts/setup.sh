@@ -58,7 +58,7 @@ test)
 	section "TSan build: the concurrent parts (ring, pool, pipeline, socket)"
 	build build-tsan "${SANITIZER_FLAGS[@]}" -DSTEREOD_WERROR=ON -DSTEREOD_SANITIZE=thread -DSTEREOD_TOOLS=OFF
 	(cd build-tsan && TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1 suppressions=$ROOT/tests/tsan.supp" \
-		ctest -j "$JOBS" --output-on-failure --timeout 900 -R 'SpscRing|FramePool|Pipeline|SocketServer|LiveRecorder')
+		ctest -j "$JOBS" --output-on-failure --timeout 900 -R 'SpscRing|FramePool|Pipeline|SocketServer|LiveRecorder|DdsPublisher')
 
 	section "fuzzing: the parsers of outside bytes (libFuzzer, clang, ASan + UBSan), fixed inputs from seed ${STEREOD_FUZZ_SEED:-1}"
 	CC=clang CXX=clang++ build build-fuzz "${SANITIZER_FLAGS[@]}" -DSTEREOD_WERROR=ON -DSTEREOD_FUZZ=ON \

@@ -2,8 +2,11 @@
 // against an independent subscriber in a network namespace (integration.dds_two_boards).
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
+#include <thread>
 
 #include "daemon/config.hpp"
 #include "daemon/dds/dds_publisher.hpp"
@@ -123,4 +126,62 @@ TEST(Dds, ConfigRefusesANameRos2CannotUse)
 	apply_override("dds.domain=7", config);
 	EXPECT_EQ(config.dds.qos, "sensor_data");
 	EXPECT_EQ(config.dds.domain, 7);
+}
+
+TEST(DdsPublisher, OffersFromThePipelineNeverWaitAndEveryFrameIsAccounted)
+{
+	// Confined to the loopback without multicast: a unit test must not announce itself on the host's networks
+	// (the wire is tested in a network namespace of its own, integration.dds_two_boards).
+	::setenv("CYCLONEDDS_URI",
+		 "<General><Interfaces><NetworkInterface "
+		 "name=\"lo\"/></Interfaces><AllowMulticast>false</AllowMulticast>"
+		 "</General><Discovery><ParticipantIndex>auto</ParticipantIndex><Peers><Peer address=\"localhost\"/>"
+		 "</Peers></Discovery>",
+		 1);
+	DdsConfig config;
+	config.enabled = true;
+	config.domain = 42;
+	config.name = "unit";
+	DdsPublisher publisher(config);
+	FrameResult r;
+	r.points.resize(500);
+	for (size_t i = 0; i < r.points.size(); ++i) {
+		r.points[i].u = static_cast<float>(i);
+		r.points[i].xyz_m = std::array<float, 3>{1, 2, static_cast<float>(i)};
+	}
+	r.groups.resize(3);
+	r.groups[1].position_m = std::array<double, 3>{0, 0, 5};
+	r.ego = EgoMotion{};
+	r.ego->valid = true;
+	r.ego->t_world_curr = std::array<double, 16>{1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
+	r.ego->t_prev_curr = r.ego->t_world_curr;
+	constexpr int kFrames = 300;
+	std::thread status([&] {
+		protocol::StatusReport s;
+		s.source = "sim";
+		for (int i = 0; i < 20; ++i) {
+			publisher.offer_status(s);
+			std::this_thread::sleep_for(std::chrono::milliseconds(1));
+		}
+	});
+	const auto start = std::chrono::steady_clock::now();
+	for (int i = 0; i < kFrames; ++i) {
+		r.seq = static_cast<uint64_t>(i);
+		r.t_capture_ns = 1'000'000'000 + i * 33'333'333LL;
+		publisher.offer(r);
+	}
+	const double offer_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+	status.join();
+	for (int i = 0; i < 200; ++i) { // let the publisher's thread catch up
+		const auto s = publisher.stats();
+		if (s.frames_published + s.frames_dropped == kFrames)
+			break;
+		std::this_thread::sleep_for(std::chrono::milliseconds(10));
+	}
+	const auto s = publisher.stats();
+	EXPECT_EQ(s.frames_published + s.frames_dropped, static_cast<uint64_t>(kFrames))
+		<< "every frame published or counted";
+	EXPECT_GT(s.frames_published, 0U);
+	EXPECT_EQ(s.write_errors, 0U);
+	EXPECT_LT(offer_s, 5.0) << "offering 300 frames took " << offer_s << " s";
 }
