@@ -1,11 +1,14 @@
 #include "tools/common.hpp"
 
 #include <fstream>
+#include <iostream>
 
 #include <nlohmann/json.hpp>
 
 #include "core/protocol.hpp"
 #include "daemon/app.hpp"
+#include "drivers/replay/mcap.hpp"
+#include "drivers/replay/mcap_recording.hpp"
 
 namespace stereod::tools {
 
@@ -33,8 +36,46 @@ std::unique_ptr<drivers::FrameSource> open_source(const SourceOptions &options)
 	return drivers::SourceRegistry::with_builtin_drivers().create(config.source);
 }
 
+namespace {
+
+/// The results channel of an MCAP file (docs/mcap.md): the same `frame` messages as NDJSON.
+std::map<uint64_t, FrameResult> read_mcap_results(const std::string &path)
+{
+	drivers::mcap::Reader reader(path);
+	std::map<uint64_t, FrameResult> results;
+	drivers::mcap::MessageView m;
+	uint64_t number = 0;
+	while (reader.next(m)) {
+		if (m.channel->topic != drivers::kMcapResultsTopic)
+			continue;
+		++number;
+		try {
+			FrameResult result =
+				protocol::parse_frame_message(nlohmann::json::parse(m.data.begin(), m.data.end()));
+			results[result.seq] = std::move(result);
+		} catch (const std::exception &e) {
+			throw std::runtime_error(path + ": " + drivers::kMcapResultsTopic + " message " +
+						 std::to_string(number) + ": " + e.what());
+		}
+	}
+	if (!reader.report().clean_end)
+		std::cerr << path << ": " << reader.report().describe() << "\n";
+	if (number == 0)
+		throw std::runtime_error(path + ": no results in it (no " + drivers::kMcapResultsTopic +
+					 " messages: a recording of frames? run stereod process over it)");
+	return results;
+}
+
+} // namespace
+
 std::map<uint64_t, FrameResult> read_results(const std::string &path)
 {
+	{
+		std::ifstream probe(path, std::ios::binary);
+		char magic[5] = {};
+		if (probe.read(magic, 5) && std::string(magic, 5) == "\x89MCAP")
+			return read_mcap_results(path);
+	}
 	std::ifstream in(path);
 	if (!in)
 		throw std::runtime_error(path + ": cannot read results");

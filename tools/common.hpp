@@ -23,7 +23,8 @@ struct SourceOptions {
 daemon::DaemonConfig load_config(const SourceOptions &options);
 std::unique_ptr<drivers::FrameSource> open_source(const SourceOptions &options);
 
-/// Reads frame messages from an NDJSON file, keyed by seq. Other message types are skipped.
+/// Reads frame messages from an NDJSON file, or the results channel of an MCAP file (`stereod process --output
+/// X.mcap`, a live MCAP recording), keyed by seq. Other message types are skipped.
 std::map<uint64_t, FrameResult> read_results(const std::string &path);
 
 } // namespace stereod::tools

@@ -346,7 +346,7 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 		}
 	}
 
-	if (params.prior.rule == PriorLabelRule::Dynamic)
+	if (params.prior.enabled && params.prior.rule == PriorLabelRule::Dynamic)
 		for (size_t i = 0; i < n; ++i)
 			if (in_person[i] != 0)
 				classification.labels[i] = PointLabel::Dynamic;
@@ -359,18 +359,11 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 	if (params.label_method != LabelMethod::Seed000)
 		follow.predicted = predicted;
 	TrackSet tracks = follow_tracks(prev_tracks, follow, params.classifier, params.temporal);
-	promote_remembered_movers(classification.labels, matches, tracks, params.classifier, params.temporal);
-	if (params.prior.enabled && params.prior.rule == PriorLabelRule::Weighted) {
-		TemporalParams weighted = params.temporal;
-		weighted.chi2 = params.prior.memory_chi2;
-		for (size_t i = 0; i < n; ++i) {
-			const auto c = static_cast<size_t>(matches[i].cur);
-			if (in_person[i] != 0 && classification.labels[i] == PointLabel::Static &&
-			    c < tracks.by_keypoint.size() &&
-			    memory_says_moving(tracks.by_keypoint[c], params.classifier, weighted))
-				classification.labels[i] = PointLabel::Dynamic;
-		}
-	}
+	// The prior's `weighted` rule: in a person region, the memory overturns `static` at its lower gate.
+	const bool weighted = params.prior.enabled && params.prior.rule == PriorLabelRule::Weighted;
+	promote_remembered_movers(classification.labels, matches, tracks, params.classifier, params.temporal,
+				  weighted ? std::span<const uint8_t>(in_person) : std::span<const uint8_t>(),
+				  params.prior.memory_chi2);
 	// The camera in the world: chained on from the previous frame, or carried over when no pose was found.
 	const geometry::Pose world_prev = prev_tracks != nullptr && prev_tracks->world_from_camera
 						  ? *prev_tracks->world_from_camera

@@ -1,5 +1,6 @@
 #include "core/vision/temporal.hpp"
 
+#include <algorithm>
 #include <cmath>
 
 namespace stereod::vision {
@@ -96,14 +97,18 @@ bool memory_says_moving(const TrackState &state, const ClassifierParams &classif
 }
 
 int promote_remembered_movers(std::span<PointLabel> labels, std::span<const Match> matches, const TrackSet &tracks,
-			      const ClassifierParams &classifier, const TemporalParams &params)
+			      const ClassifierParams &classifier, const TemporalParams &params,
+			      std::span<const uint8_t> looser, double looser_chi2)
 {
+	TemporalParams loose = params;
+	loose.chi2 = std::min(params.chi2, looser_chi2); // clearing either gate is clearing the lower one
 	int promoted = 0;
 	for (size_t i = 0; i < labels.size() && i < matches.size(); ++i) {
 		const auto c = static_cast<size_t>(matches[i].cur);
 		if (labels[i] == PointLabel::Dynamic || c >= tracks.by_keypoint.size())
 			continue;
-		if (memory_says_moving(tracks.by_keypoint[c], classifier, params)) {
+		const bool is_loose = i < looser.size() && looser[i] != 0 && labels[i] == PointLabel::Static;
+		if (memory_says_moving(tracks.by_keypoint[c], classifier, is_loose ? loose : params)) {
 			labels[i] = PointLabel::Dynamic;
 			++promoted;
 		}

@@ -112,8 +112,11 @@ double jump_statistic(const TrackState &before, cv::Point2f own, const Classifie
 bool memory_says_moving(const TrackState &state, const ClassifierParams &classifier, const TemporalParams &params);
 
 /// Relabels as dynamic every matched point whose memory says it moves (labels[i] belongs to matches[i]);
-/// returns how many changed. Labels the seed already made dynamic stay dynamic.
+/// returns how many changed. Labels the seed already made dynamic stay dynamic. `looser` (per match, may be
+/// empty) marks points whose `static` label the memory may overturn at the lower gate `looser_chi2` too: the
+/// person prior's `weighted` rule, for points in seed 001's dynamic category.
 int promote_remembered_movers(std::span<PointLabel> labels, std::span<const Match> matches, const TrackSet &tracks,
-			      const ClassifierParams &classifier, const TemporalParams &params);
+			      const ClassifierParams &classifier, const TemporalParams &params,
+			      std::span<const uint8_t> looser = {}, double looser_chi2 = 0);
 
 } // namespace stereod::vision

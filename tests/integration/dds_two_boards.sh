@@ -3,8 +3,9 @@
 # discovery multicasts on every interface it finds; here there is only this namespace's loopback):
 #   two daemons on the sim, boards "front" and "rear", publish rt/stereod/<name>/{odom,points,groups,status};
 #   an independent subscriber in C, built from the same IDL with none of stereod's code (tests/dds/dds_listen.c),
-#   receives every topic with ROS 2's type names, at the frame rate, with field values equal to the NDJSON
-#   stream's for the same frames (matched by capture time); `stereoctl fleet` lists both boards.
+#   receives every topic with ROS 2's type names, every frame the daemon published (at its rate), with field
+#   values equal to the NDJSON stream's for the same frames (matched by capture time); `stereoctl fleet` lists
+#   both boards. A DDS that cannot start stops the daemon at start with a clear error.
 source "$(dirname "$0")/lib.sh"
 LISTEN=$3
 if [ -z "${STEREOD_IN_NETNS:-}" ]; then
@@ -19,6 +20,17 @@ fi
 ip link set lo up
 ip link set lo multicast on # Cyclone DDS discovers peers by multicast where the interface allows it
 [ "$(ip -o link | wc -l)" -eq 1 ] || fail "the namespace has more than its loopback: $(ip -o link)"
+
+# DDS that cannot start is a clear error at start, naming what failed (here: an interface that does not exist).
+set +e
+CYCLONEDDS_URI='<General><Interfaces><NetworkInterface name="nonexistent0"/></Interfaces></General>' \
+	timeout 20 "$STEREOD" "${SMALL_SIM[@]}" --set output.socket="$WORK/bad.sock" --set dds.enabled=true \
+	>"$WORK/bad.log" 2>&1
+rc=$?
+set -e
+[ "$rc" -eq 2 ] || fail "DDS that cannot start: exit $rc, want 2: $(tail -3 "$WORK/bad.log")"
+grep -q "dds.enabled: DDS: cannot join domain 0" "$WORK/bad.log" || fail "no clear error: $(tail -3 "$WORK/bad.log")"
+echo "ok: DDS that cannot start stops the daemon at start: $(grep -o 'dds.enabled: .*' "$WORK/bad.log")"
 
 start_board() { # name socket
 	"$STEREOD" "${SMALL_SIM[@]}" --set output.socket="$2" --set output.status_interval_s=1 \
@@ -59,13 +71,21 @@ for board in front rear; do
 done
 echo "ok: rt/stereod/{front,rear}/{odom,points,groups,status} announced with ROS 2's type names"
 
-# ---- rates: every frame the pipeline published reaches the subscriber (reliable, keep last 10)
+# ---- rates: the frame topics at the rate the daemon publishes (its own status says it), a status a second.
+# Relative to the daemon's own rate, so that a slow build (ASan: two daemons at ~9 fps) is judged fairly.
 for board in front rear; do
-	counts=$(jq -s -c --arg b "$board" '[.[] | select(.board == $b)] | group_by(.topic) |
-		map({(.[0].topic): length}) | add' "$WORK/dds.jsonl")
-	echo "$board: $counts messages in 6 s"
-	jq -e '.odom >= 100 and (.points - .odom | fabs) <= 2 and (.groups - .odom | fabs) <= 2 and .status >= 4' <<<"$counts" >/dev/null ||
-		fail "$board: too few messages: $counts (want >= 100 frames in 6 s at the sim's 30 fps, 1 status/s)"
+	jq -s -c --arg b "$board" '[.[] | select(.board == $b)] as $m
+		| ([$m[] | select(.topic == "odom") | .stamp_ns]) as $t
+		| {odom: ($t | length), points: ([$m[] | select(.topic == "points")] | length),
+		   groups: ([$m[] | select(.topic == "groups")] | length),
+		   status: ([$m[] | select(.topic == "status")] | length),
+		   rate: (if ($t | length) > 1 then (($t | length) - 1) / ((($t | max) - ($t | min)) / 1e9) else 0 end),
+		   fps: ([$m[] | select(.topic == "status" and .fps_publish > 0) | .fps_publish] | if length > 0 then add / length else 0 end)}' \
+		"$WORK/dds.jsonl" >"$WORK/$board.rates.json"
+	echo "$board: $(cat "$WORK/$board.rates.json") (messages in 6 s; rate per second of capture time)"
+	jq -e '.odom >= 20 and (.points - .odom | fabs) <= 2 and (.groups - .odom | fabs) <= 2 and .status >= 4
+		and .rate >= 0.8 * .fps' "$WORK/$board.rates.json" >/dev/null ||
+		fail "$board: $(cat "$WORK/$board.rates.json"): want the frame topics at >= 80 % of the published fps, 1 status/s"
 	jq -e -s --arg b "$board" '[.[] | select(.board == $b and .topic == "status")] | all(.name == $b and .source == "sim")' \
 		"$WORK/dds.jsonl" >/dev/null || fail "$board: status names another board"
 done
@@ -90,18 +110,20 @@ jq -n --slurpfile d "$WORK/dds.jsonl" --slurpfile f "$WORK/front.ndjson" '
 				or ([.points[].label[0:1]] | join("")) != $p.labels)] | length,
 		groups_bad: [$groups[] | . as $g | $frames[.stamp_ns | tostring] | select(. != null)
 			| select(([.groups[] | select(.position_m) | .id | tostring]) != [$g.detections[].id])] | length,
+		in_window: (([$odom[].stamp_ns] | min) as $lo | ([$odom[].stamp_ns] | max) as $hi
+			| [$f[] | select(.type == "frame" and .t_capture_ns >= $lo and .t_capture_ns <= $hi)] | length),
 		dynamic_points: [$points[] | .labels | scan("d")] | length,
 		groups_seen: [$groups[] | .detections | length] | add
 	}' >"$WORK/compare.json"
 cat "$WORK/compare.json" | jq -c .
-jq -e '.matched >= 100 and .odom_bad == 0 and .odom_unknown_bad == 0 and .points_bad == 0 and .groups_bad == 0
+jq -e '.matched >= 20 and .matched >= 0.98 * .in_window and .odom_bad == 0 and .odom_unknown_bad == 0 and .points_bad == 0 and .groups_bad == 0
 	and .dynamic_points > 0 and .groups_seen > 0' "$WORK/compare.json" >/dev/null ||
 	fail "DDS messages differ from the NDJSON stream for the same frames: $(jq -c . "$WORK/compare.json")"
-echo "ok: front's odom, points and groups on DDS equal its NDJSON stream for $(jq .matched "$WORK/compare.json") frames"
+echo "ok: front's odom, points and groups on DDS equal its NDJSON stream for $(jq .matched "$WORK/compare.json") frames (of $(jq .in_window "$WORK/compare.json") published in that time)"
 
 # ---- stereoctl fleet lists both boards, from DDS discovery
 for board in front rear; do
-	jq -e -s --arg b "$board" 'any(.[]; .name == $b and .seen and .fps > 10 and .state == "streaming")' \
+	jq -e -s --arg b "$board" 'any(.[]; .name == $b and .seen and .fps > 0 and .state == "streaming")' \
 		"$WORK/fleet.jsonl" >/dev/null || fail "fleet does not list $board: $(cat "$WORK/fleet.jsonl")"
 done
-echo "ok: stereoctl fleet lists front and rear"
+echo "ok: stereoctl fleet lists front and rear, streaming"

@@ -43,7 +43,17 @@ jq -e '.topics["/stereod/frames"] == 40 and .topics["/stereod/left/compressed"] 
 	fail "process MCAP: $(cat "$WORK/out.json")"
 cmp -s <(comparable "$WORK/out_frames.ndjson") <(comparable "$WORK/from_srec.ndjson") ||
 	fail "the MCAP's results differ from the NDJSON stream's"
-pass "process --output X.mcap: 40 results equal to the NDJSON stream, images beside"
+# Every results reader (eval, map, trajectory) takes the MCAP as it takes the NDJSON.
+"$STEREOD" process --input sim --format sim "${SMALL_SIM[@]}" --set sim.frames=30 --output "$WORK/sim.mcap" \
+	--truth-dir "$WORK/truth" --no-progress 2>/dev/null
+"$STEREOD" process --input sim --format sim "${SMALL_SIM[@]}" --set sim.frames=30 --output "$WORK/sim.ndjson" \
+	--no-progress 2>/dev/null
+"$STEREOCTL" eval --results "$WORK/sim.mcap" --truth "$WORK/truth" --json >"$WORK/eval_mcap.json" ||
+	fail "eval on MCAP: $(cat "$WORK/eval_mcap.json")"
+"$STEREOCTL" eval --results "$WORK/sim.ndjson" --truth "$WORK/truth" --json >"$WORK/eval_ndjson.json"
+cmp -s "$WORK/eval_mcap.json" "$WORK/eval_ndjson.json" ||
+	fail "eval differs between MCAP and NDJSON results: $(head -c 300 "$WORK/eval_mcap.json")"
+pass "process --output X.mcap: 40 results equal to the NDJSON stream, images beside; eval reads it alike"
 
 # ---- 3. live recording, SIGKILLed, then stopped cleanly
 SOCK=$WORK/s.sock
