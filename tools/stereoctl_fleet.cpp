@@ -86,8 +86,10 @@ int fleet(const FleetOptions &o)
 	}
 	const dds_entity_t publications =
 		dds_create_reader(participant, DDS_BUILTIN_TOPIC_DCPSPUBLICATION, nullptr, nullptr);
+	// Best effort: such a reader matches every board's status writer, reliable (dds.qos = "reliable") or best
+	// effort ("sensor_data"); a reliable one would miss the latter (integration.dds_two_boards found it).
 	dds_qos_t *qos = dds_create_qos();
-	dds_qset_reliability(qos, DDS_RELIABILITY_RELIABLE, DDS_MSECS(100));
+	dds_qset_reliability(qos, DDS_RELIABILITY_BEST_EFFORT, 0);
 	dds_qset_history(qos, DDS_HISTORY_KEEP_LAST, 1);
 	std::map<std::string, Board> boards;
 	constexpr int kMax = 16;

@@ -2,7 +2,10 @@
  * against the same IDL (daemon/dds/ros2_types.idl, compiled by idlc for this program separately), with none of
  * stereod's code: what a ROS 2 node on another machine would receive.
  *
- *   dds_listen DOMAIN SECONDS BOARD...
+ *   dds_listen DOMAIN SECONDS BOARD[:sensor_data]...
+ *
+ * A board written NAME:sensor_data is listened to best effort (a reliable reader does not match the
+ * best-effort writers of a daemon with dds.qos = "sensor_data"), the others reliably, as ROS 2's default.
  *
  * Prints one JSON line per sample received on rt/stereod/<BOARD>/{odom,points,groups,status}, and one per
  * stereod topic discovered on the domain with the type name its writer announced. */
@@ -31,7 +34,7 @@ static void print_number(double v)
 }
 
 static dds_entity_t reader_for(dds_entity_t participant, const dds_topic_descriptor_t *type, const char *board,
-			       const char *name)
+			       const char *name, int best_effort)
 {
 	char topic_name[256];
 	snprintf(topic_name, sizeof topic_name, "rt/stereod/%s/%s", board, name);
@@ -40,12 +43,10 @@ static dds_entity_t reader_for(dds_entity_t participant, const dds_topic_descrip
 		fprintf(stderr, "dds_listen: topic %s: %s\n", topic_name, dds_strretcode(topic));
 		exit(1);
 	}
-	/* What a ROS 2 subscriber with the default profile asks for: reliable, keep last (deeper here, so a
-	 * burst between two polls is not lost to the check). A reliable reader does not match a best-effort
-	 * writer: DDS_LISTEN_QOS=sensor_data listens best effort, for daemons with dds.qos = "sensor_data". */
+	/* What a ROS 2 subscriber asks for: reliable (the default profile) or best effort (sensor data), keep
+	 * last (deeper here, so a burst between two polls is not lost to the check). */
 	dds_qos_t *qos = dds_create_qos();
-	const char *profile = getenv("DDS_LISTEN_QOS");
-	if (profile && strcmp(profile, "sensor_data") == 0)
+	if (best_effort)
 		dds_qset_reliability(qos, DDS_RELIABILITY_BEST_EFFORT, 0);
 	else
 		dds_qset_reliability(qos, DDS_RELIABILITY_RELIABLE, DDS_MSECS(100));
@@ -76,11 +77,17 @@ int main(int argc, char **argv)
 	const dds_entity_t publications = dds_create_reader(participant, DDS_BUILTIN_TOPIC_DCPSPUBLICATION, NULL, NULL);
 	dds_entity_t odom[MAX_BOARDS], points[MAX_BOARDS], groups[MAX_BOARDS], status[MAX_BOARDS];
 	for (int b = 0; b < boards; ++b) {
-		odom[b] = reader_for(participant, &nav_msgs_msg_dds__Odometry__desc, argv[3 + b], "odom");
-		points[b] = reader_for(participant, &sensor_msgs_msg_dds__PointCloud2__desc, argv[3 + b], "points");
-		groups[b] =
-			reader_for(participant, &vision_msgs_msg_dds__Detection3DArray__desc, argv[3 + b], "groups");
-		status[b] = reader_for(participant, &stereod_msgs_msg_dds__Status__desc, argv[3 + b], "status");
+		char *colon = strchr(argv[3 + b], ':');
+		const int best_effort = colon != NULL && strcmp(colon + 1, "sensor_data") == 0;
+		if (colon != NULL)
+			*colon = '\0'; /* argv[3 + b] is the board's name from here on */
+		const char *board = argv[3 + b];
+		odom[b] = reader_for(participant, &nav_msgs_msg_dds__Odometry__desc, board, "odom", best_effort);
+		points[b] =
+			reader_for(participant, &sensor_msgs_msg_dds__PointCloud2__desc, board, "points", best_effort);
+		groups[b] = reader_for(participant, &vision_msgs_msg_dds__Detection3DArray__desc, board, "groups",
+				       best_effort);
+		status[b] = reader_for(participant, &stereod_msgs_msg_dds__Status__desc, board, "status", best_effort);
 	}
 	void *samples[MAX_SAMPLES] = {0};
 	dds_sample_info_t infos[MAX_SAMPLES];

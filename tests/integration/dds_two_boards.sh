@@ -32,14 +32,15 @@ set -e
 grep -q "dds.enabled: DDS: cannot join domain 0" "$WORK/bad.log" || fail "no clear error: $(tail -3 "$WORK/bad.log")"
 echo "ok: DDS that cannot start stops the daemon at start: $(grep -o 'dds.enabled: .*' "$WORK/bad.log")"
 
-start_board() { # name socket
+start_board() { # name socket qos
 	"$STEREOD" "${SMALL_SIM[@]}" --set output.socket="$2" --set output.status_interval_s=1 \
-		--set dds.enabled=true --set dds.name="$1" 2>"$WORK/$1.log" &
+		--set dds.enabled=true --set dds.name="$1" --set dds.qos="$3" 2>"$WORK/$1.log" &
 	PIDS+=($!)
 	eval "PID_$1=$!"
 }
-start_board front "$WORK/front.sock"
-start_board rear "$WORK/rear.sock"
+# front with ROS 2's default profile (reliable), rear with the sensor-data one (best effort).
+start_board front "$WORK/front.sock" reliable
+start_board rear "$WORK/rear.sock" sensor_data
 for _ in $(seq 100); do [ -S "$WORK/front.sock" ] && [ -S "$WORK/rear.sock" ] && break; sleep 0.1; done
 [ -S "$WORK/front.sock" ] || fail "front did not start: $(cat "$WORK/front.log")"
 grep -q "DDS: publishing rt/stereod/front/" "$WORK/front.log" || fail "front: no DDS: $(cat "$WORK/front.log")"
@@ -48,7 +49,7 @@ grep -q "DDS: publishing rt/stereod/front/" "$WORK/front.log" || fail "front: no
 "$STEREOCTL" watch --socket "$WORK/front.sock" --raw >"$WORK/front.ndjson" 2>/dev/null &
 WATCH=$!
 PIDS+=($WATCH)
-"$LISTEN" 0 6 front rear >"$WORK/dds.jsonl" || fail "dds_listen failed"
+"$LISTEN" 0 6 front rear:sensor_data >"$WORK/dds.jsonl" || fail "dds_listen failed"
 kill $WATCH 2>/dev/null || true
 "$STEREOCTL" fleet --domain 0 --seconds 2.5 --json >"$WORK/fleet.jsonl" || fail "fleet: $(cat "$WORK/fleet.jsonl")"
 "$STEREOCTL" fleet --domain 0 --seconds 2.5 | tee "$WORK/fleet.txt"
