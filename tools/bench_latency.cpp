@@ -103,8 +103,7 @@ Run run(const drivers::SourceConfig &source_config, Path path, double seconds, s
 	}
 	if (publish == Publish::DdsSubscribed)
 		subscriber = std::make_unique<Subscriber>("bench");
-	std::string message;
-	uint64_t message_bytes = 0;
+	std::string message; // built as the daemon builds it: the cost being compared
 	auto source = drivers::SourceRegistry::with_builtin_drivers().create(source_config);
 	daemon::PipelineOptions options;
 	options.workers = workers;
@@ -118,7 +117,6 @@ Run run(const drivers::SourceConfig &source_config, Path path, double seconds, s
 	daemon::Pipeline pipeline(std::move(source), options, [&](FrameResult &r) {
 		if (publish != Publish::None) { // what the daemon's publisher does with each result
 			message = protocol::frame_message(r);
-			message_bytes += message.size();
 			if (dds)
 				dds->offer(r);
 		}

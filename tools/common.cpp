@@ -70,12 +70,8 @@ std::map<uint64_t, FrameResult> read_mcap_results(const std::string &path)
 
 std::map<uint64_t, FrameResult> read_results(const std::string &path)
 {
-	{
-		std::ifstream probe(path, std::ios::binary);
-		char magic[5] = {};
-		if (probe.read(magic, 5) && std::string(magic, 5) == "\x89MCAP")
-			return read_mcap_results(path);
-	}
+	if (drivers::mcap::is_mcap_file(path))
+		return read_mcap_results(path);
 	std::ifstream in(path);
 	if (!in)
 		throw std::runtime_error(path + ": cannot read results");

@@ -111,12 +111,7 @@ void add_info_command(CLI::App &app)
 	auto path = std::make_shared<std::string>();
 	cmd->add_option("recording", *path, "a .srec or .mcap file")->required();
 	cmd->callback([path] {
-		std::FILE *file = std::fopen(path->c_str(), "rb");
-		char magic[5] = {};
-		const bool mcap = file && std::fread(magic, 1, 5, file) == 5 && std::string(magic, 5) == "\x89MCAP";
-		if (file)
-			std::fclose(file);
-		throw CLI::RuntimeError(mcap ? info_mcap(*path) : info_srec(*path));
+		throw CLI::RuntimeError(drivers::mcap::is_mcap_file(*path) ? info_mcap(*path) : info_srec(*path));
 	});
 }
 

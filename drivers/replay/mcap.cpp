@@ -502,6 +502,18 @@ void Writer::finish()
 
 // ============================================================================================== Reader
 
+bool is_mcap_file(const std::string &path)
+{
+	std::FILE *file = std::fopen(path.c_str(), "rb");
+	if (!file)
+		return false;
+	uint8_t magic[sizeof(kMagic)] = {};
+	const bool mcap = std::fread(magic, 1, sizeof(magic), file) == sizeof(magic) &&
+			  std::memcmp(magic, kMagic, sizeof(kMagic)) == 0;
+	std::fclose(file);
+	return mcap;
+}
+
 std::string ReadReport::describe() const
 {
 	std::string s = std::to_string(messages) + " messages in " + std::to_string(chunks) + " chunks";
@@ -586,6 +598,21 @@ void Reader::handle_definition(uint8_t opcode, std::span<const uint8_t> content)
 	}
 }
 
+void Reader::parse_message(std::span<const uint8_t> content, MessageView &out) const
+{
+	Cursor m(content);
+	const auto channel = m.get<uint16_t>();
+	const auto it = channels_.find(channel);
+	if (it == channels_.end())
+		throw std::runtime_error("message on channel " + std::to_string(channel) +
+					 " before its Channel record");
+	out.channel = &it->second;
+	out.sequence = m.get<uint32_t>();
+	out.log_time = m.get<uint64_t>();
+	out.publish_time = m.get<uint64_t>();
+	out.data = m.rest();
+}
+
 bool Reader::next(MessageView &out)
 {
 	if (pending_) {
@@ -638,18 +665,7 @@ Reader::Step Reader::step(MessageView &out)
 			const auto content = c.bytes(length);
 			chunk_cursor_ += kRecordHead + static_cast<size_t>(length);
 			if (opcode == kMessage) {
-				Cursor m(content);
-				out.channel = nullptr;
-				const auto channel = m.get<uint16_t>();
-				const auto it = channels_.find(channel);
-				if (it == channels_.end())
-					throw std::runtime_error("message on channel " + std::to_string(channel) +
-								 " before its Channel record");
-				out.channel = &it->second;
-				out.sequence = m.get<uint32_t>();
-				out.log_time = m.get<uint64_t>();
-				out.publish_time = m.get<uint64_t>();
-				out.data = m.rest();
+				parse_message(content, out);
 				return Step::Message;
 			}
 			handle_definition(opcode, content);
@@ -694,22 +710,9 @@ Reader::Step Reader::step(MessageView &out)
 		}
 		const std::span<const uint8_t> content(record_);
 		switch (opcode) {
-		case kMessage: {
-			Cursor m(content);
-			const auto channel = m.get<uint16_t>();
-			const auto it = channels_.find(channel);
-			if (it == channels_.end()) {
-				fail("message on channel " + std::to_string(channel) + " before its Channel record",
-				     at);
-				return Step::End;
-			}
-			out.channel = &it->second;
-			out.sequence = m.get<uint32_t>();
-			out.log_time = m.get<uint64_t>();
-			out.publish_time = m.get<uint64_t>();
-			out.data = m.rest();
+		case kMessage:
+			parse_message(content, out); // a malformed one is caught below and ends the read here
 			return Step::Message;
-		}
 		case kChunk: {
 			Cursor c(content);
 			(void)c.get<uint64_t>(); // start time

@@ -176,6 +176,8 @@ private:
 	bool read_exact(uint8_t *into, size_t size);
 	bool fail(const std::string &reason, uint64_t at);
 	void handle_definition(uint8_t opcode, std::span<const uint8_t> content);
+	/// A Message record's content as a view; throws on a short record or an unknown channel.
+	void parse_message(std::span<const uint8_t> content, MessageView &out) const;
 	bool read_tail();
 
 	std::string path_;
@@ -196,5 +198,8 @@ private:
 	MessageView pending_view_;
 	ReadReport report_;
 };
+
+/// True when `path` begins with MCAP's magic (an unreadable or short file is not MCAP).
+bool is_mcap_file(const std::string &path);
 
 } // namespace stereod::drivers::mcap

@@ -301,13 +301,7 @@ std::unique_ptr<FrameRecorder> open_recorder(const std::string &path, const Reco
 
 std::unique_ptr<FrameRecordingReader> open_recording(const std::string &path)
 {
-	std::FILE *file = std::fopen(path.c_str(), "rb");
-	uint8_t magic[5] = {};
-	const bool mcap = file && std::fread(magic, 1, sizeof(magic), file) == sizeof(magic) &&
-			  std::memcmp(magic, "\x89MCAP", 5) == 0;
-	if (file)
-		std::fclose(file);
-	if (mcap)
+	if (mcap::is_mcap_file(path))
 		return std::make_unique<McapRecordingReader>(path);
 	return std::make_unique<RecordingReader>(path);
 }
