@@ -558,7 +558,7 @@ const std::vector<Option> &options()
 			"ego", "min_inliers", "fewer: the pose is not trusted (ego.valid false)",
 			[](DaemonConfig &c) -> int & { return c.motion.ego.min_inliers; }, 6, 100000));
 		o.push_back(number(
-			"ego", "pixel_sigma_px", "feature position noise of the geometric test",
+			"ego", "pixel_sigma_px", "feature position noise of the geometric test (measured_noise off)",
 			[](DaemonConfig &c) -> double & { return c.motion.ego.pixel_sigma_px; }, 0.01, 20));
 		o.push_back(number(
 			"ego", "chi2_quantile", "the geometric test's confidence (false alarms: 1 - this)",
@@ -566,6 +566,15 @@ const std::vector<Option> &options()
 		o.push_back(number(
 			"ego", "confirm_frames", "frames in a row a point must fail the test to be dynamic",
 			[](DaemonConfig &c) -> int & { return c.motion.ego.confirm_frames; }, 1, 100));
+		o.push_back(number(
+			"ego", "confirm_motion_change",
+			"confirmation: the own motion may change by this fraction between the two failures; 0 = any",
+			[](DaemonConfig &c) -> double & { return c.motion.ego.confirm_motion_change; }, 0, 10));
+		o.push_back(boolean("ego", "measured_noise", "take the test's pixel noise from each frame's pose fit",
+				    [](DaemonConfig &c) -> bool & { return c.motion.ego.measured_noise; }));
+		o.push_back(number(
+			"ego", "min_pixel_sigma_px", "floor of the measured pixel noise, per axis",
+			[](DaemonConfig &c) -> double & { return c.motion.ego.min_pixel_sigma_px; }, 0.01, 20));
 		o.push_back(number(
 			"ego", "min_parallax_px",
 			"combined: points the translation moves less than this keep seed 000's label",

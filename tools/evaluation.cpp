@@ -159,6 +159,41 @@ void count_per_mover(const FrameResult &result, const cv::Mat &mask, std::map<in
 	}
 }
 
+std::string label_errors_header()
+{
+	return "seq,u,v,label,mover,outline_px,z_m,z_true_m";
+}
+
+void write_label_errors(std::ostream &out, uint64_t seq, const FrameResult &result, const cv::Mat &mask,
+			const cv::Mat &depth_mm)
+{
+	CV_Assert(mask.type() == CV_8UC1);
+	// Distance to the outline from either side: inside a mover, to the nearest scene pixel; outside, to the
+	// nearest mover pixel.
+	cv::Mat inside, outside;
+	cv::distanceTransform(mask != 0, inside, cv::DIST_L2, cv::DIST_MASK_PRECISE);
+	cv::distanceTransform(mask == 0, outside, cv::DIST_L2, cv::DIST_MASK_PRECISE);
+	for (const auto &point : result.points) {
+		const int x = cvRound(point.u), y = cvRound(point.v);
+		if (x < 0 || y < 0 || x >= mask.cols || y >= mask.rows)
+			continue;
+		const int mover = mask.at<uint8_t>(y, x);
+		const bool wrong = (point.label == PointLabel::Dynamic && mover == 0) ||
+				   (point.label == PointLabel::Static && mover != 0);
+		if (!wrong)
+			continue;
+		const float outline = mover != 0 ? inside.at<float>(y, x) : outside.at<float>(y, x);
+		out << seq << ',' << point.u << ',' << point.v << ',' << to_string(point.label) << ',' << mover << ','
+		    << outline << ',';
+		if (point.xyz_m)
+			out << (*point.xyz_m)[2];
+		out << ',';
+		if (!depth_mm.empty() && depth_mm.at<uint16_t>(y, x) != 0)
+			out << depth_mm.at<uint16_t>(y, x) * 1e-3;
+		out << '\n';
+	}
+}
+
 std::string score_table_header()
 {
 	return "| scene | frames | decided points | dynamic precision | dynamic recall | dynamic F1 | static error "

@@ -3,6 +3,7 @@
 // `dynamic` label, and the static-point error rate. Pure: masks and results in, numbers out.
 #include <cstdint>
 #include <map>
+#include <ostream>
 #include <string>
 #include <vector>
 
@@ -71,6 +72,14 @@ struct PriorRegionScore {
 	PriorRegionScore &operator+=(const PriorRegionScore &other);
 };
 PriorRegionScore score_prior_regions(const FrameResult &result, const cv::Mat &mask, double min_fraction = 0.1);
+
+/// Every wrongly labelled point of one frame as CSV lines "seq,u,v,label,mover,outline_px,z_m,z_true_m":
+/// `mover` is the mask id under the point (0 = the static scene), `outline_px` its distance to the nearest
+/// mover outline, `z_m` / `z_true_m` the measured and true depth (empty when unknown). `depth_mm` may be
+/// empty. For finding where a method errs (near outlines, far away, without depth) rather than only how often.
+void write_label_errors(std::ostream &out, uint64_t seq, const FrameResult &result, const cv::Mat &mask,
+			const cv::Mat &depth_mm);
+std::string label_errors_header();
 
 /// A table row: "name frames points P R F1 static-error uncertain coverage".
 std::string format_score_row(const std::string &name, const LabelScore &score);

@@ -250,7 +250,8 @@ int eval_groups(const std::string &results_path, const std::string &truth_dir, c
 }
 
 int eval(const std::string &results_path, const std::string &truth_dir, const std::string &name, int border_px,
-	 double min_coverage, const std::string &per_frame_csv, bool json_out, bool per_mover)
+	 double min_coverage, const std::string &per_frame_csv, bool json_out, bool per_mover,
+	 const std::string &errors_csv)
 {
 	const auto results = tools::read_results(results_path);
 	tools::LabelScore all, covered;
@@ -263,6 +264,11 @@ int eval(const std::string &results_path, const std::string &truth_dir, const st
 		csv.open(per_frame_csv);
 		csv << "seq,static,dynamic,uncertain,precision,recall,f1,static_error_rate,coverage\n";
 	}
+	std::ofstream errors;
+	if (!errors_csv.empty()) {
+		errors.open(errors_csv);
+		errors << tools::label_errors_header() << '\n';
+	}
 	for (const auto &[seq, result] : results) {
 		if (result.points.empty())
 			continue; // the first frame has nothing to pair with
@@ -274,8 +280,13 @@ int eval(const std::string &results_path, const std::string &truth_dir, const st
 		const auto score = tools::score_frame(result, mask, border_px);
 		char depth_name[32];
 		std::snprintf(depth_name, sizeof(depth_name), "%06llu.png", static_cast<unsigned long long>(seq));
-		if (const fs::path depth_file = fs::path(truth_dir) / "depth" / depth_name; fs::exists(depth_file))
-			depth += tools::score_depth(result, cv::imread(depth_file.string(), cv::IMREAD_ANYDEPTH));
+		cv::Mat depth_mm;
+		if (const fs::path depth_file = fs::path(truth_dir) / "depth" / depth_name; fs::exists(depth_file)) {
+			depth_mm = cv::imread(depth_file.string(), cv::IMREAD_ANYDEPTH);
+			depth += tools::score_depth(result, depth_mm);
+		}
+		if (errors)
+			tools::write_label_errors(errors, seq, result, mask, depth_mm);
 		if (per_mover)
 			tools::count_per_mover(result, mask, movers);
 		regions += tools::score_prior_regions(result, mask);
@@ -573,7 +584,7 @@ int main(int argc, char **argv)
 	tools::add_info_command(app);
 
 	auto *eval_cmd = app.add_subcommand("eval", "score labelled points against ground-truth masks");
-	std::string eval_results, eval_truth, eval_name = "run", eval_csv;
+	std::string eval_results, eval_truth, eval_name = "run", eval_csv, eval_errors_csv;
 	int eval_border = 0;
 	double eval_coverage = 0.02;
 	bool eval_json = false;
@@ -591,6 +602,8 @@ int main(int argc, char **argv)
 	eval_cmd->add_option("--min-coverage", eval_coverage, "second row: frames whose movers cover at least this");
 	eval_cmd->add_option("--per-frame", eval_csv, "write per-frame scores to this CSV");
 	eval_cmd->add_flag("--json", eval_json, "print one JSON object instead of the table");
+	eval_cmd->add_option("--errors", eval_errors_csv,
+			     "write every wrongly labelled point (position, mover, distance to its outline, depth)");
 	bool eval_per_mover = false, eval_groups_only = false;
 	eval_cmd->add_flag("--per-mover", eval_per_mover, "also a table of labels per mover (mask id)");
 	eval_cmd->add_flag("--groups", eval_groups_only,
@@ -647,7 +660,7 @@ int main(int argc, char **argv)
 				return eval_groups(eval_results, eval_truth, eval_name, eval_json);
 			if (!eval_truth.empty())
 				rc = eval(eval_results, eval_truth, eval_name, eval_border, eval_coverage, eval_csv,
-					  eval_json, eval_per_mover);
+					  eval_json, eval_per_mover, eval_errors_csv);
 			if (rc == 0 && !trajectory.poses.empty()) {
 				trajectory.results = eval_results;
 				trajectory.name = eval_name;

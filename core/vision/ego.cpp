@@ -251,6 +251,17 @@ PoseEstimate estimate_pose(std::span<const cv::Vec3f> prev_xyz, std::span<const 
 	inliers = inliers_of(object, image, rig, out.curr_from_prev, params.ransac_threshold_px, rms);
 	out.inliers = static_cast<int>(inliers.size());
 	out.rms_px = rms;
+	{
+		// The median residual over every candidate, movers included: unlike the inliers' RMS it is not cut
+		// at the RANSAC threshold, and movers are a minority of the points that vote.
+		std::vector<double> norms(object.size());
+		for (size_t i = 0; i < object.size(); ++i)
+			norms[i] = std::sqrt(error2(object, image, i, rig, out.curr_from_prev));
+		const auto mid = norms.begin() + static_cast<std::ptrdiff_t>(norms.size() / 2);
+		std::nth_element(norms.begin(), mid, norms.end());
+		constexpr double kRayleighMedian = 1.1774100225154747; // sqrt(2 ln 2)
+		out.residual_sigma_px = std::isfinite(*mid) ? *mid / kRayleighMedian : 0;
+	}
 	for (int i : inliers)
 		out.inlier_mask[index[static_cast<size_t>(i)]] = 1;
 	if (out.inliers < params.min_inliers || !std::isfinite(out.curr_from_prev.t[0]) ||
@@ -275,14 +286,55 @@ double anchored_depth_statistic(const cv::Vec3f &anchor_world, float anchor_sigm
 	return var > 0 ? d * d / var : std::numeric_limits<double>::quiet_NaN();
 }
 
+double measured_disparity_sigma(std::span<const cv::Vec3f> prev_xyz, std::span<const float> cur_depth_m,
+				std::span<const uint8_t> inlier_mask, const geometry::Pose &curr_from_prev,
+				const geometry::StereoRig &rig, size_t min_points)
+{
+	const double fb = rig.fx * rig.baseline_m;
+	std::vector<double> differences;
+	for (size_t i = 0; i < prev_xyz.size() && i < cur_depth_m.size() && i < inlier_mask.size(); ++i) {
+		if (inlier_mask[i] == 0 || !std::isfinite(prev_xyz[i][2]) || !(cur_depth_m[i] > 0) ||
+		    !std::isfinite(cur_depth_m[i]))
+			continue;
+		const double z_pred = (curr_from_prev * cv::Vec3d(prev_xyz[i][0], prev_xyz[i][1], prev_xyz[i][2]))[2];
+		if (!(z_pred > 0))
+			continue;
+		differences.push_back(std::abs(fb / z_pred - fb / static_cast<double>(cur_depth_m[i])));
+	}
+	if (differences.size() < std::max<size_t>(min_points, 1) || !(fb > 0))
+		return 0;
+	const auto mid = differences.begin() + static_cast<std::ptrdiff_t>(differences.size() / 2);
+	std::nth_element(differences.begin(), mid, differences.end());
+	constexpr double kMadToSigma = 1 / 0.6744897501960817;
+	return *mid * kMadToSigma / std::numbers::sqrt2;
+}
+
+bool continues_motion(cv::Point2f residual, cv::Point2f prev_residual, double residual_var_px2, double change,
+		      double quantile)
+{
+	if (change <= 0 || !std::isfinite(prev_residual.x) || !std::isfinite(prev_residual.y) ||
+	    !std::isfinite(residual.x) || !std::isfinite(residual.y))
+		return true;
+	const cv::Point2d r(residual), d = r - cv::Point2d(prev_residual);
+	const double var = 2 * residual_var_px2 + change * change * r.dot(r);
+	return d.dot(d) <= chi2_quantile(2, quantile) * var;
+}
+
 GeometricContext GeometricContext::make(const geometry::StereoRig &rig, const geometry::Pose &curr_from_prev,
-					double disparity_sigma_px, const EgoParams &params)
+					double disparity_sigma_px, const EgoParams &params, double residual_sigma_px)
 {
 	GeometricContext context;
 	context.rig = rig;
 	context.curr_from_prev = curr_from_prev;
 	context.disparity_sigma_px = disparity_sigma_px;
 	context.params = params;
+	if (params.measured_noise && residual_sigma_px > 0) {
+		const double sigma = std::max(residual_sigma_px, params.min_pixel_sigma_px);
+		context.residual_var_px2 = sigma * sigma;
+	} else {
+		// A fixed noise per feature position: the residual carries it at both ends.
+		context.residual_var_px2 = 2 * params.pixel_sigma_px * params.pixel_sigma_px;
+	}
 	// Below a millimetre of translation there are no usable epipolar lines: the camera only turned.
 	context.fundamental = curr_from_prev.distance() > 1e-3
 				      ? geometry::fundamental_from_pose(rig.k(), curr_from_prev)
@@ -298,7 +350,7 @@ GeometricTest geometric_test(const GeometricContext &context, cv::Point2f prev_p
 	const geometry::StereoRig &rig = context.rig;
 	const geometry::Pose &pose = context.curr_from_prev;
 	const EgoParams &params = context.params;
-	const double s2 = params.pixel_sigma_px * params.pixel_sigma_px;
+	const double var = context.residual_var_px2;
 	const bool translated = cv::norm(context.fundamental) > 0;
 
 	// Where the point would be at infinite depth: the rotation alone moves it.
@@ -307,17 +359,17 @@ GeometricTest geometric_test(const GeometricContext &context, cv::Point2f prev_p
 	const bool has_prev_depth = std::isfinite(prev_xyz[2]) && prev_xyz[2] > 0;
 	const cv::Point2d cur(cur_px.x, cur_px.y);
 
-	if (!has_prev_depth || !translated) {
+	if (!has_prev_depth) {
 		if (!translated && at_infinity) {
 			// Only a turn: every static point lands where its ray does, whatever its depth.
 			const cv::Point2d r = cur - *at_infinity;
 			test.d1_px = std::hypot(r.x, r.y);
-			test.statistic = r.dot(r) / (2 * s2);
+			test.statistic = r.dot(r) / var;
 			test.dof = 2;
 			test.predicted = cv::Point2f(*at_infinity);
 		} else if (translated) {
 			test.d1_px = geometry::epipolar_distance(context.fundamental, cv::Point2d(prev_px), cur);
-			test.statistic = test.d1_px * test.d1_px / (2 * s2);
+			test.statistic = test.d1_px * test.d1_px / var;
 			test.dof = 1;
 		}
 		test.moving = test.dof > 0 && test.statistic > chi2_quantile(test.dof, params.chi2_quantile);
@@ -330,16 +382,24 @@ GeometricTest geometric_test(const GeometricContext &context, cv::Point2f prev_p
 		return test; // the point went behind the camera: nothing to compare
 	test.predicted = cv::Point2f(*predicted);
 	const cv::Point2d r = cur - *predicted;
-	test.d1_px = geometry::epipolar_distance(context.fundamental, cv::Point2d(prev_px), cur);
-	test.statistic = test.d1_px * test.d1_px / (2 * s2);
-	test.dof = 1;
-	if (params.along_line) {
+	if (!translated) {
+		// Only a turn: no epipolar line to split the residual along, so it is tested whole; the depth is
+		// still predicted (a point walking straight at a still camera changes only its depth).
+		test.d1_px = std::hypot(r.x, r.y);
+		test.statistic = r.dot(r) / var;
+		test.dof = 2;
+	} else {
+		test.d1_px = geometry::epipolar_distance(context.fundamental, cv::Point2d(prev_px), cur);
+		test.statistic = test.d1_px * test.d1_px / var;
+		test.dof = 1;
+	}
+	if (translated && params.along_line) {
 		test.along_px = std::sqrt(std::max(0.0, r.dot(r) - test.d1_px * test.d1_px));
 		const double parallax = cv::norm(*predicted - *at_infinity);
 		const double z_prev = prev_xyz[2];
 		const double relative = rig.depth_sigma(z_prev, context.disparity_sigma_px) / z_prev;
-		const double var = 2 * s2 + parallax * parallax * relative * relative;
-		test.statistic += test.along_px * test.along_px / var;
+		const double along_var = var + parallax * parallax * relative * relative;
+		test.statistic += test.along_px * test.along_px / along_var;
 		++test.dof;
 	}
 	if (params.depth_check && std::isfinite(cur_depth_m) && cur_depth_m > 0) {

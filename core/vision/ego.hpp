@@ -36,7 +36,17 @@ struct EgoParams {
 	double ransac_confidence = 0.999;
 	int min_inliers = 15;	     ///< fewer: the pose is not trusted (ego.valid = false)
 	double max_depth_m = 60;     ///< farther points carry no translation; they still vote for rotation
-	double pixel_sigma_px = 1.0; ///< feature position noise for the geometric test
+	double pixel_sigma_px = 1.0; ///< feature position noise for the geometric test (when not measured)
+	/// Take the geometric test's pixel noise from each frame's pose fit instead of `pixel_sigma_px`: the
+	/// residual of a static point under the pose is exactly what the test measures, so the spread of the
+	/// fit's residuals is its noise (from their median, which the movers among the candidates barely move).
+	/// A fixed sigma is either loose on clean footage (a walker keeping pace passes) or tight on rough
+	/// footage (false alarms); the measured one follows the footage. Never below `min_pixel_sigma_px`.
+	bool measured_noise = true;
+	double min_pixel_sigma_px = 0.1; ///< floor of the measured noise, per axis (sub-pixel matching's limit)
+	/// With measured noise, the depth terms' disparity noise is measured too (the pose's inliers' predicted
+	/// against measured disparity), never below this.
+	double min_disparity_sigma_px = 0.05;
 	double chi2_quantile = 0.99; ///< the geometric test's false-alarm rate is 1 - this
 	bool along_line = true;	     ///< include the along-the-epipolar-line term (seed 001 has d1 and d2 only)
 	bool depth_check = true;     ///< include eq. 4's depth term d2 (needs depth at frame n)
@@ -44,6 +54,11 @@ struct EgoParams {
 	/// (until then it is uncertain): a one-frame failure is usually a mismatch or a stereo error at an
 	/// occlusion edge, a mover keeps failing. 1 = every frame alone, as the seed.
 	int confirm_frames = 2;
+	/// ... and the two failures must move alike: the point's own motion (its residual against the static
+	/// scene's prediction) may change between the frames by noise plus this fraction of itself (one standard
+	/// deviation). A mover's image velocity changes little in a frame; a mismatch onto a look-alike jumps by
+	/// as much as it moved. 0 = no such check (any two failures confirm).
+	double confirm_motion_change = 0.25;
 	/// Combined labels: a point whose parallax (the pose's prediction against the rotation's alone) is under
 	/// this keeps seed 000's label: there the translation is poorly determined and the homography better.
 	/// Off by default: measured, it cost the walk more than it gained elsewhere (docs/geometry.md).
@@ -82,8 +97,11 @@ struct PoseEstimate {
 	int inliers = 0;
 	std::vector<uint8_t> inlier_mask; ///< per input point
 	double rms_px = 0;		  ///< re-projection RMS over the inliers
-	bool prior_used = false;	  ///< the candidates were gated by the motion prior
-	int samples = 0;		  ///< RANSAC samples drawn (EgoParams::ransac_confidence ends it early)
+	/// Per-axis noise of a static point's re-projection residual, from the median residual of all candidates
+	/// (a 2-d Gaussian's norm has median 1.1774 sigma): the geometric test's noise when it is measured.
+	double residual_sigma_px = 0;
+	bool prior_used = false; ///< the candidates were gated by the motion prior
+	int samples = 0;	 ///< RANSAC samples drawn (EgoParams::ransac_confidence ends it early)
 };
 
 /// `prev_xyz` (frame n-1's camera, NaN = no depth) and `cur_px` are index-aligned; `votes[i] == 0` keeps a
@@ -109,9 +127,13 @@ struct GeometricContext {
 	geometry::Pose curr_from_prev;
 	cv::Matx33d fundamental; ///< from the pose; all zeros when the camera did not translate
 	double disparity_sigma_px = 0.3;
+	/// Variance, per image axis, of a static point's position against the prediction (both ends' noise).
+	double residual_var_px2 = 2.0;
 	EgoParams params;
+	/// `residual_sigma_px`: the pose fit's measured noise (PoseEstimate), used when params.measured_noise.
 	[[nodiscard]] static GeometricContext make(const geometry::StereoRig &rig, const geometry::Pose &curr_from_prev,
-						   double disparity_sigma_px, const EgoParams &params);
+						   double disparity_sigma_px, const EgoParams &params,
+						   double residual_sigma_px = 0);
 };
 
 /// The test for one match: prev pixel (and its 3D point when measured), cur pixel (and its measured depth,
@@ -124,6 +146,21 @@ GeometricTest geometric_test(const GeometricContext &context, cv::Point2f prev_p
 /// Returns the normalised squared depth difference (1 degree of freedom); NaN when either depth is missing.
 double anchored_depth_statistic(const cv::Vec3f &anchor_world, float anchor_sigma_m,
 				const geometry::Pose &camera_from_world, float cur_depth_m, double cur_sigma_m);
+
+/// The disparity noise of one measurement, from the static points the pose explains: each inlier's
+/// disparity predicted from its frame n-1 point and the pose against the one measured at frame n (`cur_depth_m`,
+/// NaN = none). The median absolute difference over 0.6745 is the difference's sigma, over sqrt 2 one
+/// measurement's. 0 when fewer than `min_points` inliers have depth at both frames.
+double measured_disparity_sigma(std::span<const cv::Vec3f> prev_xyz, std::span<const float> cur_depth_m,
+				std::span<const uint8_t> inlier_mask, const geometry::Pose &curr_from_prev,
+				const geometry::StereoRig &rig, size_t min_points);
+
+/// Whether `residual` (a point's own motion this frame, pixels) continues `prev_residual` (its own motion the
+/// frame before): |r - r_prev|^2 / (2 var + (change |r|)^2) within the 2-dof chi-square gate at `quantile`,
+/// with `var` the per-axis noise of one residual. True when `change` is 0 or `prev_residual` is unknown (NaN):
+/// then there is nothing to compare with.
+bool continues_motion(cv::Point2f residual, cv::Point2f prev_residual, double residual_var_px2, double change,
+		      double quantile);
 
 /// The chi-square quantile for 1-3 degrees of freedom at probability p (0.95, 0.99 or 0.999).
 double chi2_quantile(int dof, double p);

@@ -48,6 +48,28 @@ bool flagged_before(const TrackSet *prev_tracks, size_t p)
 	       prev_tracks->dynamic_by_keypoint[p] != 0;
 }
 
+/// A point's own motion: where it is minus where the static scene model puts it (the pose's prediction from
+/// its depth, else the homography); NaN without either.
+cv::Point2f own_motion(const PointPair &pair, cv::Point2f predicted, const std::optional<cv::Matx33d> &homography)
+{
+	if (std::isfinite(predicted.x))
+		return pair.cur - predicted;
+	if (homography) {
+		const cv::Vec3d h = *homography * cv::Vec3d(pair.prev.x, pair.prev.y, 1);
+		if (h[2] != 0)
+			return pair.cur - cv::Point2f(static_cast<float>(h[0] / h[2]), static_cast<float>(h[1] / h[2]));
+	}
+	return {kNaN, kNaN};
+}
+
+/// The own motion keypoint `p` of the previous frame had (NaN when unknown).
+cv::Point2f own_motion_before(const TrackSet *prev_tracks, size_t p)
+{
+	if (prev_tracks == nullptr || p >= prev_tracks->residual_by_keypoint.size())
+		return {kNaN, kNaN};
+	return prev_tracks->residual_by_keypoint[p];
+}
+
 /// The label a point gets from seed 000's label, the geometric test and whether its two ends look alike.
 PointLabel combine(LabelMethod method, PointLabel seed, const GeometricTest &test, bool has_prev_depth,
 		   bool texture_agrees)
@@ -298,8 +320,20 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 				static_cast<double>(frame.device_ns - prev_tracks->t_ns) * 1e-9, params.ego);
 		pose = estimate_pose(prev_xyz, cur_px, votes, *params.rig, params.ego, prior ? &*prior : nullptr);
 		if (pose->valid) {
-			const GeometricContext context = GeometricContext::make(
-				*params.rig, pose->curr_from_prev, params.stereo.disparity_sigma_px, params.ego);
+			double disparity_sigma = params.stereo.disparity_sigma_px;
+			if (params.ego.measured_noise) {
+				std::vector<float> cur_depth(n);
+				for (size_t i = 0; i < n; ++i)
+					cur_depth[i] = cur.xyz[static_cast<size_t>(matches[i].cur)][2];
+				const double measured = measured_disparity_sigma(
+					prev_xyz, cur_depth, pose->inlier_mask, pose->curr_from_prev, *params.rig,
+					static_cast<size_t>(params.ego.min_inliers));
+				if (measured > 0)
+					disparity_sigma = std::max(measured, params.ego.min_disparity_sigma_px);
+			}
+			const GeometricContext context =
+				GeometricContext::make(*params.rig, pose->curr_from_prev, disparity_sigma, params.ego,
+						       pose->residual_sigma_px);
 			predicted.assign(n, cv::Point2f(kNaN, kNaN));
 			const bool have_texture = classification.texture_agrees.size() == n;
 			failed.assign(n, 0);
@@ -338,8 +372,14 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 					label = PointLabel::Uncertain;
 				if (test.moving)
 					failed[i] = 1;
+				// Confirmed by a failure in the frame before that moved the same way: a mover's own
+				// motion changes little between frames, a mismatch onto a look-alike jumps.
+				const auto p = static_cast<size_t>(matches[i].prev);
 				if (!low_parallax && label == PointLabel::Dynamic && params.ego.confirm_frames > 1 &&
-				    !flagged_before(prev_tracks, static_cast<size_t>(matches[i].prev)))
+				    (!flagged_before(prev_tracks, p) ||
+				     !continues_motion(own_motion(pairs[i], test.predicted, classification.homography),
+						       own_motion_before(prev_tracks, p), context.residual_var_px2,
+						       params.ego.confirm_motion_change, params.ego.chi2_quantile)))
 					label = PointLabel::Uncertain; // not yet confirmed
 				classification.labels[i] = label;
 			}
@@ -444,6 +484,11 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 	for (size_t i = 0; i < n; ++i)
 		if (classification.labels[i] == PointLabel::Dynamic || (i < failed.size() && failed[i] != 0))
 			tracks.dynamic_by_keypoint[static_cast<size_t>(matches[i].cur)] = 1;
+	tracks.residual_by_keypoint.assign(cur.keypoints.size(), cv::Point2f(kNaN, kNaN));
+	for (size_t i = 0; i < n; ++i)
+		tracks.residual_by_keypoint[static_cast<size_t>(matches[i].cur)] =
+			own_motion(pairs[i], i < predicted.size() ? predicted[i] : cv::Point2f(kNaN, kNaN),
+				   classification.homography);
 	result.points.reserve(n);
 	for (size_t i = 0; i < n; ++i) {
 		LabelledPoint point;

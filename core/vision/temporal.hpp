@@ -72,6 +72,9 @@ struct TrackSet {
 	/// for the next frame's pose (seed 001: points found dynamic are left out of tracking), so a mover found
 	/// once cannot pull the pose; and a point failing the test again next frame is confirmed dynamic.
 	std::vector<uint8_t> dynamic_by_keypoint;
+	/// Per keypoint: its position minus where the static scene model put it (the pose and its depth, else the
+	/// homography); NaN when there was no prediction. A mover's residual changes little from frame to frame.
+	std::vector<cv::Point2f> residual_by_keypoint;
 	/// Moving-target groups followed so far (core/vision/groups.hpp).
 	GroupMemory groups;
 	/// The person prior's regions in this frame (detected here, or carried from the last detection).

@@ -1,3 +1,5 @@
+#include <sstream>
+
 #include <gtest/gtest.h>
 
 #include <opencv2/imgproc.hpp>
@@ -32,6 +34,27 @@ TEST(Evaluation, ScoresLabelsAgainstTheMask)
 	EXPECT_NEAR(s.f1(), 2.0 / 3.0, 1e-12);
 	EXPECT_NEAR(s.static_error_rate(), 1.0 / 3.0, 1e-12);
 	EXPECT_NEAR(s.mean_coverage(), 0.25, 1e-12);
+}
+
+TEST(Evaluation, ListsEachWrongLabelWithItsDistanceToTheOutline)
+{
+	cv::Mat mask = cv::Mat::zeros(100, 100, CV_8UC1);
+	mask(cv::Rect(50, 0, 50, 100)).setTo(2); // a mover on the right half: columns 50-99
+	cv::Mat depth = cv::Mat::zeros(100, 100, CV_16UC1);
+	depth.setTo(4000);
+	FrameResult r;
+	LabelledPoint wrong_dynamic{47, 10, PointLabel::Dynamic, 47, 10, 0, std::array<float, 3>{0, 0, 3.5F}};
+	LabelledPoint wrong_static{70, 20, PointLabel::Static, 70, 20, 0, std::nullopt};
+	LabelledPoint right{20, 20, PointLabel::Static, 20, 20, 0, std::nullopt};
+	LabelledPoint unsure{20, 30, PointLabel::Uncertain, 20, 30, 0, std::nullopt};
+	r.points = {wrong_dynamic, wrong_static, right, unsure};
+	std::ostringstream out;
+	write_label_errors(out, 7, r, mask, depth);
+	// Column 47 is 3 px from the mover's first column; column 70 is 21 px inside it (to column 49).
+	EXPECT_EQ(out.str(), "7,47,10,dynamic,0,3,3.5,4\n7,70,20,static,2,21,,4\n");
+	std::ostringstream no_depth;
+	write_label_errors(no_depth, 7, r, mask, cv::Mat());
+	EXPECT_EQ(no_depth.str(), "7,47,10,dynamic,0,3,3.5,\n7,70,20,static,2,21,,\n");
 }
 
 TEST(Evaluation, BorderSkipsPointsOnTheOutline)

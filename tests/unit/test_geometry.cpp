@@ -186,6 +186,103 @@ TEST(Geometry, PnpRecoversAKnownPoseDespiteOutliers)
 	EXPECT_NE(few.reason.find("only 5"), std::string::npos);
 }
 
+TEST(Geometry, TheTestsNoiseIsMeasuredFromThePoseFit)
+{
+	// Static points seen with 0.3 px of Gaussian noise per axis, a tenth of them movers: the pose fit's
+	// residuals give the noise back (the median of the residual norms over 1.1774), and the test uses it.
+	const geometry::Pose truth{geometry::rotation_from_vector({0.002, 0.01, 0}), {0.02, 0, 0.05}};
+	std::mt19937 rng(11);
+	std::uniform_real_distribution<double> unit(0, 1);
+	std::normal_distribution<double> noise(0, 0.3);
+	std::vector<cv::Vec3f> xyz;
+	std::vector<cv::Point2f> px;
+	for (int i = 0; i < 2000; ++i) {
+		const double z = 2 + 20 * unit(rng);
+		const auto p = *kRig.triangulate(unit(rng) * 639, unit(rng) * 479, kRig.fx * kRig.baseline_m / z);
+		auto q = *kRig.project(truth * p) + cv::Point2d(noise(rng), noise(rng));
+		if (i % 10 == 0)
+			q += cv::Point2d(12, 4);
+		xyz.emplace_back(p);
+		px.emplace_back(q);
+	}
+	const std::vector<uint8_t> votes(xyz.size(), 1);
+	EgoParams params;
+	const PoseEstimate e = estimate_pose(xyz, px, votes, kRig, params);
+	ASSERT_TRUE(e.valid) << e.reason;
+	// The tenth that moved pulls the median up a little (the 50th percentile of the static points becomes
+	// their 55th): 0.3 * sqrt(-2 ln 0.444) / 1.1774 = 0.325.
+	EXPECT_NEAR(e.residual_sigma_px, 0.325, 0.025);
+	const GeometricContext measured = GeometricContext::make(kRig, truth, 0.3, params, e.residual_sigma_px);
+	EXPECT_NEAR(measured.residual_var_px2, e.residual_sigma_px * e.residual_sigma_px, 1e-12);
+	params.measured_noise = false;
+	EXPECT_NEAR(GeometricContext::make(kRig, truth, 0.3, params, e.residual_sigma_px).residual_var_px2, 2.0, 1e-12);
+	// Never below the floor, whatever a noiseless fit says.
+	params.measured_noise = true;
+	EXPECT_NEAR(GeometricContext::make(kRig, truth, 0.3, params, 0.01).residual_var_px2, 0.01, 1e-12);
+}
+
+TEST(Geometry, DisparityNoiseIsMeasuredFromTheInliers)
+{
+	// Points 3-20 m away, the camera 5 cm forward; frame n's disparity measured with 0.2 px of noise. Each
+	// difference carries the noise of one prediction-free measurement and the frame n-1 depth's (here
+	// exact), so the estimate over sqrt 2 is 0.2 / sqrt 2; points outside the inlier mask do not count.
+	geometry::Pose curr_from_prev;
+	curr_from_prev.t = {0, 0, -0.05};
+	std::mt19937 rng(5);
+	std::uniform_real_distribution<double> unit(0, 1);
+	std::normal_distribution<double> noise(0, 0.2);
+	std::vector<cv::Vec3f> xyz;
+	std::vector<float> depth;
+	std::vector<uint8_t> inlier;
+	const double fb = kRig.fx * kRig.baseline_m;
+	for (int i = 0; i < 4000; ++i) {
+		const auto p = *kRig.triangulate(unit(rng) * 639, unit(rng) * 479, fb / (3 + 17 * unit(rng)));
+		const double z_now = (curr_from_prev * p)[2];
+		const bool outlier = i % 5 == 0;
+		depth.push_back(static_cast<float>(fb / (fb / z_now + noise(rng) + (outlier ? 3.0 : 0.0))));
+		xyz.emplace_back(p);
+		inlier.push_back(outlier ? 0 : 1);
+	}
+	const double sigma = measured_disparity_sigma(xyz, depth, inlier, curr_from_prev, kRig, 15);
+	EXPECT_NEAR(sigma, 0.2 / std::sqrt(2.0), 0.01);
+	// Too few inliers with depth: nothing measured.
+	EXPECT_EQ(measured_disparity_sigma(std::span(xyz).first(10), std::span(depth).first(10), inlier, curr_from_prev,
+					   kRig, 15),
+		  0);
+}
+
+TEST(Geometry, ConfirmationNeedsTheSameOwnMotionTwice)
+{
+	// var = 0.1^2 per axis, change 0.25: for r = (5, 0) the innovation's variance is 2 * 0.01 + 0.0625 * 25
+	// = 1.5825, and the 2-dof 99 % gate 9.21 allows |r - r_prev|^2 up to 14.57: 3.82 px.
+	EXPECT_TRUE(continues_motion({5, 0}, {1.5, 0}, 0.01, 0.25, 0.99));  // 3.5 px apart
+	EXPECT_FALSE(continues_motion({5, 0}, {1.0, 0}, 0.01, 0.25, 0.99)); // 4 px apart
+	EXPECT_FALSE(continues_motion({5, 0}, {-20, 3}, 0.01, 0.25, 0.99)); // a mismatch jumps
+	// Nothing to compare with, or the check off: confirmed.
+	EXPECT_TRUE(continues_motion({5, 0}, {NAN, NAN}, 0.01, 0.25, 0.99));
+	EXPECT_TRUE(continues_motion({5, 0}, {-20, 3}, 0.01, 0, 0.99));
+}
+
+TEST(Geometry, AStillCameraStillTestsTheDepth)
+{
+	// No translation (no epipolar line): the residual is tested whole (2 dof) and the depth too, so a
+	// person walking straight at a still camera, whose image hardly moves, is seen by eq. 4. Point 4 m
+	// ahead on the axis; it comes 0.3 m nearer. Depth noise at 4 m and 3.7 m with 0.3 px:
+	// 16/80*0.3 = 0.06 and 13.69/80*0.3 = 0.0513; (0.3)^2 / (0.06^2 + 0.0513^2) = 14.6 > chi2(3, 99%) 11.3.
+	EgoParams params;
+	params.pixel_sigma_px = 1.0;
+	const GeometricContext context = GeometricContext::make(kRig, geometry::Pose{}, 0.3, params);
+	const cv::Vec3f on_axis(0, 0, 4);
+	const GeometricTest still = geometric_test(context, {320, 240}, on_axis, {320, 240}, 4.0F);
+	EXPECT_EQ(still.dof, 3);
+	EXPECT_FALSE(still.moving);
+	const GeometricTest nearer = geometric_test(context, {320, 240}, on_axis, {320, 240}, 3.7F);
+	EXPECT_EQ(nearer.dof, 3);
+	EXPECT_NEAR(nearer.d2_m, 0.3, 1e-6);
+	EXPECT_NEAR(nearer.statistic, 0.09 / (0.06 * 0.06 + 0.0513375 * 0.0513375), 0.05);
+	EXPECT_TRUE(nearer.moving);
+}
+
 TEST(Geometry, MotionPriorRefusesWhatNoAccelerationExplains)
 {
 	// Far points cannot tell a turn from a sideways step; a near mover holds most of the points. Without
