@@ -1,0 +1,75 @@
+#!/usr/bin/env bash
+# arm64 boards (issue 17): builds stereod for arm64 with Debian's cross toolchain and multiarch libraries,
+# writes the arm64 .deb, and runs the unit tests under qemu-user. Everything happens in a throwaway Debian
+# bookworm root (debootstrap, cached): on bookworm libopencv-dev:arm64 and libopencv-dev:amd64 cannot be
+# installed together, so the build machine's own packages are never touched.
+# Root only (debootstrap, systemd-nspawn). Not part of CI (it takes longer than CI's budget allows beside the
+# other beds); docs/service.md has its measured time.
+# Usage: scripts/cross-arm64.sh [OUT_DIR]   (default: build-arm64-out; the .deb and the logs land there)
+set -euo pipefail
+SRC=$(cd "$(dirname "$0")/.." && pwd)
+OUT=$(realpath -m "${1:-$SRC/build-arm64-out}")
+CACHE=${STEREOD_TESTBED_CACHE:-/var/cache/stereod-testbeds}
+fail() { echo "cross-arm64: $*" >&2; exit 1; }
+[ "$(id -u)" -eq 0 ] || fail "needs root (debootstrap, systemd-nspawn)"
+for tool in debootstrap systemd-nspawn; do
+	command -v $tool >/dev/null || fail "$tool missing: bash scripts/install-deps.sh --test-beds"
+done
+mkdir -p "$OUT" "$CACHE"
+WORK=$(mktemp -d /tmp/stereod-cross.XXXXXX)
+trap 'rm -rf "$WORK"' EXIT
+t0=$SECONDS
+say() { echo "[$((SECONDS - t0)) s] $*"; }
+
+# The packages the cross build needs inside the root: the cross compiler, the build machine's tools (cmake,
+# idlc), the target's libraries (:arm64), the header-only ones (any architecture) and qemu-user.
+target_libs=(libopencv-dev libspdlog-dev libfmt-dev libsystemd-dev zlib1g-dev libgtest-dev cyclonedds-dev
+	libaravis-dev libusb-1.0-0-dev libdc1394-dev libturbojpeg0-dev)
+packages=(crossbuild-essential-arm64 cmake ninja-build pkg-config dpkg-dev file qemu-user cyclonedds-tools
+	libeigen3-dev nlohmann-json3-dev libcli11-dev libtoml11-dev opencv-doc "${target_libs[@]/%/:arm64}")
+
+exec 9>"$CACHE/.lock"
+flock 9
+if [ ! -f "$CACHE/bookworm-cross-arm64.tar" ]; then
+	say "a bookworm root with the arm64 cross toolchain and libraries into $CACHE (once)"
+	rm -rf "$CACHE/cross.tmp"
+	debootstrap --variant=minbase bookworm "$CACHE/cross.tmp" http://deb.debian.org/debian \
+		>"$OUT/debootstrap.log" 2>&1 || fail "debootstrap: $(tail -5 "$OUT/debootstrap.log")"
+	systemd-nspawn -q -D "$CACHE/cross.tmp" --register=no --keep-unit --bind=/var/cache/apt/archives sh -c "
+		dpkg --add-architecture arm64 && apt-get update -q &&
+		DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends ${packages[*]} &&
+		apt-get clean" >"$OUT/install.log" 2>&1 || fail "apt: $(tail -15 "$OUT/install.log")"
+	tar -C "$CACHE/cross.tmp" -cf "$CACHE/bookworm-cross-arm64.tar.tmp" .
+	mv "$CACHE/bookworm-cross-arm64.tar.tmp" "$CACHE/bookworm-cross-arm64.tar"
+	rm -rf "$CACHE/cross.tmp"
+fi
+flock -u 9
+mkdir -p "$WORK/root"
+tar -C "$WORK/root" -xf "$CACHE/bookworm-cross-arm64.tar"
+say "root ready"
+
+# The tree as committed (git ls-files), so that a local build folder does not leak in.
+mkdir -p "$WORK/root/src"
+(cd "$SRC" && git ls-files -z | xargs -0 tar -cf - ) | tar -C "$WORK/root/src" -xf -
+in_root() { systemd-nspawn -q -D "$WORK/root" --register=no --keep-unit --bind="$OUT:/out" "$@"; }
+
+in_root sh -c 'cmake -S /src -B /build -G Ninja -DCMAKE_BUILD_TYPE=Release -DSTEREOD_WERROR=ON \
+		-DCMAKE_TOOLCHAIN_FILE=/src/cmake/aarch64-linux-gnu.cmake && cmake --build /build' \
+	>"$OUT/build.log" 2>&1 || fail "build: $(grep -m5 -E 'error|Error' "$OUT/build.log"; tail -5 "$OUT/build.log")"
+in_root file /build/daemon/stereod /build/tools/stereoctl | tee "$OUT/file.txt"
+grep -q "ARM aarch64" "$OUT/file.txt" || fail "the binaries are not arm64"
+say "built"
+
+in_root sh -c 'cd /build && cpack -G DEB -B /out/pkg' >"$OUT/cpack.log" 2>&1 || fail "cpack: $(tail -8 "$OUT/cpack.log")"
+deb=$(ls "$OUT"/pkg/stereod_*_arm64.deb) || fail "no stereod_*_arm64.deb in $OUT/pkg"
+in_root dpkg-deb -f "/out/pkg/$(basename "$deb")" Architecture Depends | tee "$OUT/control.txt"
+say "packaged $(basename "$deb")"
+
+# The unit tests, every one, under qemu-user (ctest runs them through CMAKE_CROSSCOMPILING_EMULATOR).
+if in_root sh -c 'cd /build && ctest -L unit -j2 --output-on-failure' >"$OUT/unit.log" 2>&1; then
+	say "unit tests under qemu-aarch64: $(grep -E 'tests passed' "$OUT/unit.log")"
+else
+	tail -30 "$OUT/unit.log"
+	fail "unit tests failed under qemu-aarch64 (log: $OUT/unit.log)"
+fi
+say "done"
