@@ -53,7 +53,7 @@ mkdir -p "$WORK/root/src"
 (cd "$SRC" && git ls-files -z | xargs -0 tar -cf - ) | tar -C "$WORK/root/src" -xf -
 in_root() { systemd-nspawn -q -D "$WORK/root" --register=no --keep-unit --bind="$OUT:/out" "$@"; }
 
-in_root sh -c 'cmake -S /src -B /build -G Ninja -DCMAKE_BUILD_TYPE=Release -DSTEREOD_WERROR=ON \
+in_root sh -c 'cmake -S /src -B /build -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DSTEREOD_WERROR=ON \
 		-DCMAKE_TOOLCHAIN_FILE=/src/cmake/aarch64-linux-gnu.cmake && cmake --build /build' \
 	>"$OUT/build.log" 2>&1 || fail "build: $(grep -m5 -E 'error|Error' "$OUT/build.log"; tail -5 "$OUT/build.log")"
 in_root file /build/daemon/stereod /build/tools/stereoctl | tee "$OUT/file.txt"
