@@ -605,6 +605,36 @@ const std::vector<Option> &options()
 		// [groups]: moving-target groups (core/vision/groups.hpp)
 		o.push_back(boolean("groups", "enabled", "find moving-target groups (seed 002's flow clustering)",
 				    [](DaemonConfig &c) -> bool & { return c.motion.groups.enabled; }));
+		{
+			Option members{
+				"groups", "members",
+				"points clustered: auto (labels with a metric pose, else flow) | flow (seed 002's "
+				"mean-flow split) | labels (those labelled dynamic)",
+				nullptr, nullptr};
+			members.set = [](const Value &v, DaemonConfig &c) {
+				const std::string name = v.is_string() ? std::string(v.as_string()) : std::string();
+				if (name == "auto")
+					c.motion.groups.members = vision::GroupMembers::Auto;
+				else if (name == "flow")
+					c.motion.groups.members = vision::GroupMembers::Flow;
+				else if (name == "labels")
+					c.motion.groups.members = vision::GroupMembers::Labels;
+				else
+					throw std::invalid_argument("must be one of auto, flow, labels");
+			};
+			members.show = [](const DaemonConfig &c) {
+				switch (c.motion.groups.members) {
+				case vision::GroupMembers::Flow:
+					return std::string("\"flow\"");
+				case vision::GroupMembers::Labels:
+					return std::string("\"labels\"");
+				case vision::GroupMembers::Auto:
+					break;
+				}
+				return std::string("\"auto\"");
+			};
+			o.push_back(std::move(members));
+		}
 		o.push_back(number(
 			"groups", "min_flow_px",
 			"shortest residual flow (pixels per frame) that counts as strong motion",

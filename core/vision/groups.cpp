@@ -104,6 +104,13 @@ std::vector<uint32_t> strong_motion(const std::vector<MotionPoint> &points, cons
 	std::vector<uint32_t> strong;
 	if (points.empty())
 		return strong;
+	if (params.members == GroupMembers::Labels) {
+		for (size_t i = 0; i < points.size(); ++i)
+			if (points[i].dynamic && std::isfinite(points[i].residual.x) &&
+			    std::isfinite(points[i].residual.y))
+				strong.push_back(static_cast<uint32_t>(i));
+		return strong;
+	}
 	double mean_u = 0, mean_v = 0;
 	size_t measured = 0; // a point without a prediction has a NaN residual and takes no part
 	for (const auto &p : points)

@@ -15,8 +15,20 @@
 
 namespace stereod::vision {
 
+/// Which points are clustered into groups.
+enum class GroupMembers : uint8_t {
+	Auto,  ///< Labels where the frame has a metric pose (stereo, RGB-D), else Flow
+	Flow,  ///< seed 002's split: residual flow above the frame's mean in u or v (and min_flow_px)
+	Labels ///< the points the classifier labelled dynamic (seed 000 / seed 001's tests, confirmed)
+};
+
 struct GroupParams {
 	bool enabled = true;
+	/// Seed 002 splits by the frame's mean residual, which takes every large residual for motion; with a
+	/// metric pose the confirmed labels are the better members (on the stereo sim far fewer groups on the
+	/// static scene), without one (monocular footage) the labels miss too many movers and the split is
+	/// better. docs/groups.md has both measured. Auto chooses per frame.
+	GroupMembers members = GroupMembers::Auto;
 	/// A point moves strongly when its residual flow (observed minus what the camera's motion predicts)
 	/// exceeds the frame's mean in u or in v (seed 002) and is at least this long, pixels per frame.
 	double min_flow_px = 1.0;
@@ -48,6 +60,7 @@ struct MotionPoint {
 	int octave = 0;			   ///< pyramid level of its keypoint (the seed's "scale")
 	std::optional<cv::Vec3f> xyz;	   ///< this frame's camera, metres
 	std::optional<cv::Vec3f> prev_xyz; ///< the previous frame's camera, metres
+	bool dynamic = false;		   ///< the classifier's label (GroupMembers::Labels)
 };
 
 /// A group followed across frames.
@@ -85,7 +98,8 @@ struct GroupOutput {
 };
 
 /// The seed's split: indices of points whose residual exceeds the mean |u| or mean |v| residual of all of
-/// them and is at least `min_flow_px` long.
+/// them and is at least `min_flow_px` long. With GroupMembers::Labels: the points labelled dynamic that have
+/// a residual. Auto is the pipeline's to resolve per frame (motion_stages); here it splits as Flow.
 std::vector<uint32_t> strong_motion(const std::vector<MotionPoint> &points, const GroupParams &params);
 
 /// Groups of this frame from its points and the previous frame's memory (null on the first frame).

@@ -443,6 +443,7 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 			const auto c = static_cast<size_t>(matches[i].cur);
 			const auto p = static_cast<size_t>(matches[i].prev);
 			m.octave = cur.keypoints[c].octave;
+			m.dynamic = classification.labels[i] == PointLabel::Dynamic;
 			if (c < cur.xyz.size() && std::isfinite(cur.xyz[c][2]))
 				m.xyz = cur.xyz[c];
 			if (p < prev->xyz.size() && std::isfinite(prev->xyz[p][2]))
@@ -458,8 +459,11 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 		context.rig = params.rig;
 		// Affinity Propagation's buffers, kept per worker thread so that clustering does not allocate.
 		thread_local AffinityPropagation workspace;
+		GroupParams group_params = params.groups;
+		if (group_params.members == GroupMembers::Auto)
+			group_params.members = moved ? GroupMembers::Labels : GroupMembers::Flow;
 		GroupOutput found = find_groups(motion, prev_tracks != nullptr ? &prev_tracks->groups : nullptr,
-						context, params.groups, workspace);
+						context, group_params, workspace);
 		group_of_point = std::move(found.group_of_point);
 		tracks.groups = std::move(found.memory);
 		result.groups = std::move(found.groups);

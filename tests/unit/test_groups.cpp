@@ -185,3 +185,20 @@ TEST(Groups, StillSceneHasNoGroup)
 		EXPECT_LE(out.strong.size(), 4u) << "noise under min_flow_px is not strong motion";
 	}
 }
+
+TEST(Groups, LabelMembersAreTheDynamicPointsWithAResidual)
+{
+	// Three points: a large residual labelled static (flow's split would take it), a small one labelled
+	// dynamic, and a dynamic one without a prediction (NaN residual). Labels take only the second.
+	std::vector<MotionPoint> points(3);
+	points[0].residual = {8, 0};
+	points[1].residual = {0.5F, 0.2F};
+	points[1].dynamic = true;
+	points[2].residual = {NAN, NAN};
+	points[2].dynamic = true;
+	GroupParams params;
+	params.members = GroupMembers::Labels;
+	EXPECT_EQ(strong_motion(points, params), std::vector<uint32_t>{1});
+	params.members = GroupMembers::Flow;
+	EXPECT_EQ(strong_motion(points, params), std::vector<uint32_t>{0});
+}
