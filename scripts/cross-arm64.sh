@@ -3,19 +3,26 @@
 # writes the arm64 .deb, and runs the unit tests under qemu-user. Everything happens in a throwaway Debian
 # bookworm root (debootstrap, cached): on bookworm libopencv-dev:arm64 and libopencv-dev:amd64 cannot be
 # installed together, so the build machine's own packages are never touched.
-# Root only (debootstrap, systemd-nspawn). Not part of CI (it takes longer than CI's budget allows beside the
-# other beds); docs/service.md has its measured time.
+# Root only (debootstrap, systemd-nspawn); about 8 GB of disk. CI runs it once as `cross.arm64` (label
+# cross;slow); docs/service.md has its measured time. Exit 77 (skipped) without root, the tools or the disk.
 # Usage: scripts/cross-arm64.sh [OUT_DIR]   (default: build-arm64-out; the .deb and the logs land there)
 set -euo pipefail
 SRC=$(cd "$(dirname "$0")/.." && pwd)
 OUT=$(realpath -m "${1:-$SRC/build-arm64-out}")
 CACHE=${STEREOD_TESTBED_CACHE:-/var/cache/stereod-testbeds}
 fail() { echo "cross-arm64: $*" >&2; exit 1; }
-[ "$(id -u)" -eq 0 ] || fail "needs root (debootstrap, systemd-nspawn)"
+skip() { echo "SKIP: cross-arm64: $*"; exit 77; }
+[ "$(id -u)" -eq 0 ] || skip "needs root (debootstrap, systemd-nspawn)"
 for tool in debootstrap systemd-nspawn; do
-	command -v $tool >/dev/null || fail "$tool missing: bash scripts/install-deps.sh --test-beds"
+	command -v $tool >/dev/null || skip "$tool missing: bash scripts/install-deps.sh --test-beds"
 done
 mkdir -p "$OUT" "$CACHE"
+# The cached root (2.4 GB), its copy, the build and apt's downloads: about 8 GB when nothing is cached yet.
+need_gb=$([ -f "$CACHE/bookworm-cross-arm64.tar" ] && echo 4 || echo 8)
+for dir in "$CACHE" /tmp; do
+	free_gb=$(($(df --output=avail -k "$dir" | tail -1) / 1024 / 1024))
+	[ "$free_gb" -ge "$need_gb" ] || skip "$free_gb GB free on $dir, $need_gb GB needed"
+done
 WORK=$(mktemp -d /tmp/stereod-cross.XXXXXX)
 trap 'rm -rf "$WORK"' EXIT
 t0=$SECONDS
