@@ -9,6 +9,7 @@
 #include <functional>
 #include <map>
 #include <sstream>
+#include <utility>
 
 #include <sys/un.h>
 
@@ -138,32 +139,30 @@ Option text_list(std::string section, std::string key, std::string help, Access 
 	return o;
 }
 
-/// ReplayRate is kept as an enum in the source config; the file names it.
-Option replay_rate()
+/// An enum option: the file names one of `names` (in the order the error message lists them).
+template <typename Access, typename Enum>
+Option enumeration(std::string section, std::string key, std::string help, Access access,
+		   std::vector<std::pair<std::string, Enum>> names)
 {
-	Option o{"source", "rate", "file sources: recorded (original spacing) | fast | step (Enter per frame)", nullptr,
-		 nullptr};
-	o.set = [](const Value &v, DaemonConfig &c) {
+	Option o{std::move(section), std::move(key), std::move(help), nullptr, nullptr};
+	o.set = [access, names](const Value &v, DaemonConfig &c) {
 		const std::string s = v.is_string() ? std::string(v.as_string()) : std::string();
-		if (s == "recorded")
-			c.source.rate = drivers::ReplayRate::Recorded;
-		else if (s == "fast")
-			c.source.rate = drivers::ReplayRate::Fast;
-		else if (s == "step")
-			c.source.rate = drivers::ReplayRate::Step;
-		else
-			throw std::invalid_argument("must be one of recorded, fast, step");
-	};
-	o.show = [](const DaemonConfig &c) {
-		switch (c.source.rate) {
-		case drivers::ReplayRate::Recorded:
-			return std::string("\"recorded\"");
-		case drivers::ReplayRate::Step:
-			return std::string("\"step\"");
-		case drivers::ReplayRate::Fast:
-			break;
+		std::string list;
+		for (const auto &[name, value] : names) {
+			if (name == s) {
+				access(c) = value;
+				return;
+			}
+			list += (list.empty() ? "" : ", ") + name;
 		}
-		return std::string("\"fast\"");
+		throw std::invalid_argument("must be one of " + list);
+	};
+	o.show = [access, names](const DaemonConfig &c) {
+		const Enum current = access(const_cast<DaemonConfig &>(c));
+		for (const auto &[name, value] : names)
+			if (value == current)
+				return "\"" + name + "\"";
+		return std::string("\"?\"");
 	};
 	return o;
 }
@@ -180,7 +179,13 @@ const std::vector<Option> &options()
 			{"sim", "aravis", "v4l2", "dc1394", "replay", "video", "kitti", "euroc", "tum", "folder"}));
 		o.push_back(text("source", "path", "file or folder for the file drivers",
 				 [](DaemonConfig &c) -> std::string & { return c.source.path; }));
-		o.push_back(replay_rate());
+		o.push_back(enumeration(
+			"source", "rate", "file sources: recorded (original spacing) | fast | step (Enter per frame)",
+			[](DaemonConfig &c) -> drivers::ReplayRate & { return c.source.rate; },
+			std::vector<std::pair<std::string, drivers::ReplayRate>>{
+				{"recorded", drivers::ReplayRate::Recorded},
+				{"fast", drivers::ReplayRate::Fast},
+				{"step", drivers::ReplayRate::Step}}));
 		o.push_back(boolean("source", "realtime", "pace generated sources (sim) at their frame rate",
 				    [](DaemonConfig &c) -> bool & { return c.source.realtime; }));
 		o.push_back(number(
@@ -362,24 +367,11 @@ const std::vector<Option> &options()
 		// [features]
 		o.push_back(boolean("features", "enabled", "run feature classification (seed 000)",
 				    [](DaemonConfig &c) -> bool & { return c.motion.enabled; }));
-		{
-			Option detector{"features", "detector", "orb (OpenCV) | surf (this project's SURF)", nullptr,
-					nullptr};
-			detector.set = [](const Value &v, DaemonConfig &c) {
-				const std::string name = v.is_string() ? std::string(v.as_string()) : std::string();
-				if (name == "orb")
-					c.motion.features.detector = vision::Detector::Orb;
-				else if (name == "surf")
-					c.motion.features.detector = vision::Detector::Surf;
-				else
-					throw std::invalid_argument("must be one of orb, surf");
-			};
-			detector.show = [](const DaemonConfig &c) {
-				return std::string(c.motion.features.detector == vision::Detector::Orb ? "\"orb\""
-												       : "\"surf\"");
-			};
-			o.push_back(std::move(detector));
-		}
+		o.push_back(enumeration(
+			"features", "detector", "orb (OpenCV) | surf (this project's SURF)",
+			[](DaemonConfig &c) -> vision::Detector & { return c.motion.features.detector; },
+			std::vector<std::pair<std::string, vision::Detector>>{{"orb", vision::Detector::Orb},
+									      {"surf", vision::Detector::Surf}}));
 		o.push_back(number(
 			"features", "max_features", "ORB keypoints kept per frame",
 			[](DaemonConfig &c) -> int & { return c.motion.features.max_features; }, 16, 20000));
@@ -478,34 +470,14 @@ const std::vector<Option> &options()
 		o.push_back(number(
 			"classifier", "min_matches", "fewer matches: no homography, all uncertain",
 			[](DaemonConfig &c) -> int & { return c.motion.classifier.min_matches; }, 4, 100000));
-		{
-			Option method{"classifier", "label_method",
-				      "with depth: combined | geometric (seed 001) | seed000 (homography only)",
-				      nullptr, nullptr};
-			method.set = [](const Value &v, DaemonConfig &c) {
-				const std::string name = v.is_string() ? std::string(v.as_string()) : std::string();
-				if (name == "combined")
-					c.motion.label_method = vision::LabelMethod::Combined;
-				else if (name == "geometric")
-					c.motion.label_method = vision::LabelMethod::Geometric;
-				else if (name == "seed000")
-					c.motion.label_method = vision::LabelMethod::Seed000;
-				else
-					throw std::invalid_argument("must be one of combined, geometric, seed000");
-			};
-			method.show = [](const DaemonConfig &c) {
-				switch (c.motion.label_method) {
-				case vision::LabelMethod::Geometric:
-					return std::string("\"geometric\"");
-				case vision::LabelMethod::Seed000:
-					return std::string("\"seed000\"");
-				case vision::LabelMethod::Combined:
-					break;
-				}
-				return std::string("\"combined\"");
-			};
-			o.push_back(std::move(method));
-		}
+		o.push_back(enumeration(
+			"classifier", "label_method",
+			"with depth: combined | geometric (seed 001) | seed000 (homography only)",
+			[](DaemonConfig &c) -> vision::LabelMethod & { return c.motion.label_method; },
+			std::vector<std::pair<std::string, vision::LabelMethod>>{
+				{"combined", vision::LabelMethod::Combined},
+				{"geometric", vision::LabelMethod::Geometric},
+				{"seed000", vision::LabelMethod::Seed000}}));
 		// [stereo]: sparse stereo on rectified pairs (core/vision/stereo.hpp)
 		o.push_back(boolean("stereo", "enabled", "match the right eye for depth when the source is calibrated",
 				    [](DaemonConfig &c) -> bool & { return c.motion.stereo.enabled; }));
@@ -576,6 +548,9 @@ const std::vector<Option> &options()
 			"ego", "min_pixel_sigma_px", "floor of the measured pixel noise, per axis",
 			[](DaemonConfig &c) -> double & { return c.motion.ego.min_pixel_sigma_px; }, 0.01, 20));
 		o.push_back(number(
+			"ego", "min_disparity_sigma_px", "floor of the measured disparity noise",
+			[](DaemonConfig &c) -> double & { return c.motion.ego.min_disparity_sigma_px; }, 0.001, 20));
+		o.push_back(number(
 			"ego", "min_parallax_px",
 			"combined: points the translation moves less than this keep seed 000's label",
 			[](DaemonConfig &c) -> double & { return c.motion.ego.min_parallax_px; }, 0, 1000));
@@ -605,36 +580,15 @@ const std::vector<Option> &options()
 		// [groups]: moving-target groups (core/vision/groups.hpp)
 		o.push_back(boolean("groups", "enabled", "find moving-target groups (seed 002's flow clustering)",
 				    [](DaemonConfig &c) -> bool & { return c.motion.groups.enabled; }));
-		{
-			Option members{
-				"groups", "members",
-				"points clustered: auto (labels with a metric pose, else flow) | flow (seed 002's "
-				"mean-flow split) | labels (those labelled dynamic)",
-				nullptr, nullptr};
-			members.set = [](const Value &v, DaemonConfig &c) {
-				const std::string name = v.is_string() ? std::string(v.as_string()) : std::string();
-				if (name == "auto")
-					c.motion.groups.members = vision::GroupMembers::Auto;
-				else if (name == "flow")
-					c.motion.groups.members = vision::GroupMembers::Flow;
-				else if (name == "labels")
-					c.motion.groups.members = vision::GroupMembers::Labels;
-				else
-					throw std::invalid_argument("must be one of auto, flow, labels");
-			};
-			members.show = [](const DaemonConfig &c) {
-				switch (c.motion.groups.members) {
-				case vision::GroupMembers::Flow:
-					return std::string("\"flow\"");
-				case vision::GroupMembers::Labels:
-					return std::string("\"labels\"");
-				case vision::GroupMembers::Auto:
-					break;
-				}
-				return std::string("\"auto\"");
-			};
-			o.push_back(std::move(members));
-		}
+		o.push_back(enumeration(
+			"groups", "members",
+			"points clustered: auto (labels with a metric pose, else flow) | flow (seed 002's mean-flow "
+			"split) | labels (those labelled dynamic)",
+			[](DaemonConfig &c) -> vision::GroupMembers & { return c.motion.groups.members; },
+			std::vector<std::pair<std::string, vision::GroupMembers>>{
+				{"auto", vision::GroupMembers::Auto},
+				{"flow", vision::GroupMembers::Flow},
+				{"labels", vision::GroupMembers::Labels}}));
 		o.push_back(number(
 			"groups", "min_flow_px",
 			"shortest residual flow (pixels per frame) that counts as strong motion",
@@ -711,35 +665,14 @@ const std::vector<Option> &options()
 		o.push_back(number(
 			"prior", "max_age_frames", "forget a carried box after this many frames without a detection",
 			[](DaemonConfig &c) -> int & { return c.motion.prior.max_age_frames; }, 1, 1000));
-		{
-			Option rule{"prior", "points",
-				    "points in a person box: weighted (memory gate memory_chi2) | judged | dynamic "
-				    "(seed 001)",
-				    nullptr, nullptr};
-			rule.set = [](const Value &v, DaemonConfig &c) {
-				const std::string name = v.is_string() ? std::string(v.as_string()) : std::string();
-				if (name == "judged")
-					c.motion.prior.rule = vision::PriorLabelRule::Judged;
-				else if (name == "weighted")
-					c.motion.prior.rule = vision::PriorLabelRule::Weighted;
-				else if (name == "dynamic")
-					c.motion.prior.rule = vision::PriorLabelRule::Dynamic;
-				else
-					throw std::invalid_argument("must be one of weighted, judged, dynamic");
-			};
-			rule.show = [](const DaemonConfig &c) {
-				switch (c.motion.prior.rule) {
-				case vision::PriorLabelRule::Judged:
-					return std::string("\"judged\"");
-				case vision::PriorLabelRule::Dynamic:
-					return std::string("\"dynamic\"");
-				case vision::PriorLabelRule::Weighted:
-					break;
-				}
-				return std::string("\"weighted\"");
-			};
-			o.push_back(std::move(rule));
-		}
+		o.push_back(enumeration(
+			"prior", "points",
+			"points in a person box: weighted (memory gate memory_chi2) | judged | dynamic (seed 001)",
+			[](DaemonConfig &c) -> vision::PriorLabelRule & { return c.motion.prior.rule; },
+			std::vector<std::pair<std::string, vision::PriorLabelRule>>{
+				{"weighted", vision::PriorLabelRule::Weighted},
+				{"judged", vision::PriorLabelRule::Judged},
+				{"dynamic", vision::PriorLabelRule::Dynamic}}));
 		o.push_back(number(
 			"prior", "memory_chi2", "weighted: the motion memory's gate for points in a person box",
 			[](DaemonConfig &c) -> double & { return c.motion.prior.memory_chi2; }, 0.01, 1000));

@@ -414,6 +414,11 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 	if (moved && params.ego.anchor_min_frames > 0 && params.label_method != LabelMethod::Seed000)
 		anchor_tracks(tracks, matches, cur, world_from_curr, classification, *params.rig, params, *prev_tracks,
 			      failed);
+	tracks.residual_by_keypoint.assign(cur.keypoints.size(), cv::Point2f(kNaN, kNaN));
+	for (size_t i = 0; i < n; ++i)
+		tracks.residual_by_keypoint[static_cast<size_t>(matches[i].cur)] =
+			own_motion(pairs[i], i < predicted.size() ? predicted[i] : cv::Point2f(kNaN, kNaN),
+				   classification.homography);
 	std::vector<int> group_of_point; // per match: the published group it moves with, or -1
 	if (params.groups.enabled) {
 		StageTimer groups_timer(result.timing, "groups");
@@ -424,23 +429,15 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 			MotionPoint &m = motion[i];
 			m.px = pairs[i].cur;
 			m.flow = pairs[i].cur - pairs[i].prev;
-			cv::Point2f expected = pairs[i].prev;
-			if (i < predicted.size() && std::isfinite(predicted[i].x)) {
-				expected = predicted[i];
-			} else if (moved) {
+			const auto c = static_cast<size_t>(matches[i].cur);
+			const cv::Point2f own = tracks.residual_by_keypoint[c];
+			if (moved && !(i < predicted.size() && std::isfinite(predicted[i].x)))
 				// With a metric pose, a point without depth has no prediction: a homography cannot
 				// explain the parallax of a camera moving through the scene, so it stays out of the
 				// grouping.
-				expected = cv::Point2f(kNaN, kNaN);
-			} else if (classification.homography) {
-				const cv::Vec3d h =
-					*classification.homography * cv::Vec3d(pairs[i].prev.x, pairs[i].prev.y, 1);
-				if (h[2] != 0)
-					expected = cv::Point2f(static_cast<float>(h[0] / h[2]),
-							       static_cast<float>(h[1] / h[2]));
-			}
-			m.residual = pairs[i].cur - expected;
-			const auto c = static_cast<size_t>(matches[i].cur);
+				m.residual = cv::Point2f(kNaN, kNaN);
+			else
+				m.residual = std::isfinite(own.x) ? own : m.flow; // no scene model: standing still
 			const auto p = static_cast<size_t>(matches[i].prev);
 			m.octave = cur.keypoints[c].octave;
 			m.dynamic = classification.labels[i] == PointLabel::Dynamic;
@@ -488,11 +485,6 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 	for (size_t i = 0; i < n; ++i)
 		if (classification.labels[i] == PointLabel::Dynamic || (i < failed.size() && failed[i] != 0))
 			tracks.dynamic_by_keypoint[static_cast<size_t>(matches[i].cur)] = 1;
-	tracks.residual_by_keypoint.assign(cur.keypoints.size(), cv::Point2f(kNaN, kNaN));
-	for (size_t i = 0; i < n; ++i)
-		tracks.residual_by_keypoint[static_cast<size_t>(matches[i].cur)] =
-			own_motion(pairs[i], i < predicted.size() ? predicted[i] : cv::Point2f(kNaN, kNaN),
-				   classification.homography);
 	result.points.reserve(n);
 	for (size_t i = 0; i < n; ++i) {
 		LabelledPoint point;
