@@ -589,6 +589,42 @@ const std::vector<Option> &options()
 				{"auto", vision::GroupMembers::Auto},
 				{"flow", vision::GroupMembers::Flow},
 				{"labels", vision::GroupMembers::Labels}}));
+		o.push_back(enumeration(
+			"groups", "flow",
+			"motion the groups come from: sparse (the feature points' matches) | lk (seed 002's pyramidal "
+			"LK on a grid) | dis (DIS dense flow, averaged per grid cell)",
+			[](DaemonConfig &c) -> vision::GroupFlow & { return c.motion.dense.method; },
+			std::vector<std::pair<std::string, vision::GroupFlow>>{{"sparse", vision::GroupFlow::Sparse},
+									       {"lk", vision::GroupFlow::PyrLk},
+									       {"dis", vision::GroupFlow::Dis}}));
+		o.push_back(number(
+			"groups", "flow_scale", "lk / dis: the flow runs on the left image scaled by this",
+			[](DaemonConfig &c) -> double & { return c.motion.dense.scale; }, 0.05, 1));
+		o.push_back(number(
+			"groups", "cell_px", "lk / dis: grid cell side (full-resolution pixels); a cell is one sample",
+			[](DaemonConfig &c) -> int & { return c.motion.dense.step_px; }, 2, 256));
+		o.push_back(number(
+			"groups", "lk_window", "lk: window side (seed 002: 7)",
+			[](DaemonConfig &c) -> int & { return c.motion.dense.lk_window; }, 3, 63));
+		o.push_back(number(
+			"groups", "lk_levels", "lk: pyramid levels above the original (seed 002: 3)",
+			[](DaemonConfig &c) -> int & { return c.motion.dense.lk_levels; }, 0, 8));
+		o.push_back(number(
+			"groups", "lk_min_eigen",
+			"lk: weaker gradients (minimum eigenvalue) carry no motion (seed 002: 0.001)",
+			[](DaemonConfig &c) -> double & { return c.motion.dense.lk_min_eigen; }, 0, 1));
+		o.push_back(number(
+			"groups", "max_round_trip_px",
+			"lk / dis: a cell's flow followed back must land this close to its start (0: no check)",
+			[](DaemonConfig &c) -> double & { return c.motion.dense.max_round_trip_px; }, 0, 1000));
+		o.push_back(number(
+			"groups", "min_strong_neighbours",
+			"lk / dis: strong cells a strong cell needs among its 8 neighbours (0: none)",
+			[](DaemonConfig &c) -> int & { return c.motion.dense.min_strong_neighbours; }, 0, 8));
+		o.push_back(number(
+			"groups", "depth_radius_cells",
+			"lk / dis: a cell's depth is the median of the stereo points within this many cells",
+			[](DaemonConfig &c) -> int & { return c.motion.dense.depth_radius_cells; }, 0, 32));
 		o.push_back(number(
 			"groups", "min_flow_px",
 			"shortest residual flow (pixels per frame) that counts as strong motion",
@@ -612,6 +648,10 @@ const std::vector<Option> &options()
 		o.push_back(number(
 			"groups", "min_points", "points a cluster needs to be a group",
 			[](DaemonConfig &c) -> int & { return c.motion.groups.min_points; }, 1, 100000));
+		o.push_back(number(
+			"groups", "merge_gap_px",
+			"clusters whose boxes come this close (pixels) and move alike are merged (negative: never)",
+			[](DaemonConfig &c) -> double & { return c.motion.groups.merge_gap_px; }, -1, 10000));
 		o.push_back(number(
 			"groups", "neighbours", "Affinity Propagation: messages to this many nearest samples",
 			[](DaemonConfig &c) -> int & { return c.motion.groups.affinity.neighbours; }, 1, 10000));

@@ -91,7 +91,7 @@ private:
 };
 
 Run run(const drivers::SourceConfig &source_config, Path path, double seconds, size_t workers,
-	Publish publish = Publish::None)
+	Publish publish = Publish::None, vision::GroupFlow flow = vision::GroupFlow::Sparse)
 {
 	std::unique_ptr<daemon::DdsPublisher> dds;
 	std::unique_ptr<Subscriber> subscriber;
@@ -111,6 +111,7 @@ Run run(const drivers::SourceConfig &source_config, Path path, double seconds, s
 	options.motion.enabled = path != Path::Spine;
 	if (path == Path::Stereo)
 		options.motion.rig = source->info().calibration; // both eyes' features, stereo, pose, geometric check
+	options.motion.dense.method = flow; // the groups' members: feature matches, or seed 002's global flow
 	std::mutex m;
 	std::vector<int64_t> latencies;
 	std::map<std::string, double> stages;
@@ -150,11 +151,12 @@ void row(const char *name, const Run &r)
 		return it == r.stage_ms.end() ? 0.0 : it->second;
 	};
 	std::printf("| %-28s | %6.1f | %7.2f | %7.2f | %7.2f | %7.2f | %6llu | %6llu | %6.2f | %6.2f | %6.2f | %6.2f | "
-		    "%6.2f |\n",
+		    "%6.2f | %6.2f | %6.2f |\n",
 		    name, r.fps, r.latency.p50_ms, r.latency.p90_ms, r.latency.p99_ms, r.latency.max_ms,
 		    static_cast<unsigned long long>(r.stats.ring_evicted),
 		    static_cast<unsigned long long>(r.stats.pool_exhausted), stage("extract"), stage("stereo"),
-		    stage("match") + stage("subpixel"), stage("classify"), stage("pose"));
+		    stage("match") + stage("subpixel"), stage("classify"), stage("pose"),
+		    stage("flow_image") + stage("flow"), stage("groups"));
 }
 
 } // namespace
@@ -173,6 +175,8 @@ int main(int argc, char **argv)
 	app.add_option("--fps", fps);
 	app.add_option("--workers", workers);
 	app.add_option("--scene", scene);
+	bool with_flow = false;
+	app.add_flag("--flow", with_flow, "also the stereo path with the groups on seed 002's global flow (lk, dis)");
 	bool with_dds = false;
 	app.add_flag("--dds", with_dds, "also the stereo path publishing NDJSON, NDJSON + DDS, and with a subscriber");
 	CLI11_PARSE(app, argc, argv);
@@ -186,13 +190,19 @@ int main(int argc, char **argv)
 	config.sim.scene = scene;
 	std::printf("sim '%s' %dx%d stereo at %.0f fps, %zu workers, %.0f s per run, drop-oldest\n\n", scene.c_str(),
 		    width, height, fps, workers, seconds);
-	std::printf("| %-28s | %6s | %7s | %7s | %7s | %7s | %6s | %6s | %6s | %6s | %6s | %6s | %6s |\n", "pipeline",
-		    "fps", "p50 ms", "p90 ms", "p99 ms", "max ms", "ring", "pool", "extr.", "stereo", "match", "class.",
-		    "pose");
-	std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+	std::printf("| %-28s | %6s | %7s | %7s | %7s | %7s | %6s | %6s | %6s | %6s | %6s | %6s | %6s | %6s | %6s |\n",
+		    "pipeline", "fps", "p50 ms", "p90 ms", "p99 ms", "max ms", "ring", "pool", "extr.", "stereo",
+		    "match", "class.", "pose", "flow", "groups");
+	std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
 	row("spine only (vision off)", run(config, Path::Spine, seconds, workers));
 	row("ORB + seed-000 (left eye)", run(config, Path::Mono, seconds, workers));
 	row("stereo: both eyes, pose", run(config, Path::Stereo, seconds, workers));
+	if (with_flow) {
+		row("stereo, groups.flow = lk",
+		    run(config, Path::Stereo, seconds, workers, Publish::None, vision::GroupFlow::PyrLk));
+		row("stereo, groups.flow = dis",
+		    run(config, Path::Stereo, seconds, workers, Publish::None, vision::GroupFlow::Dis));
+	}
 	std::vector<std::pair<const char *, Run>> dds_rows;
 	if (with_dds) {
 		for (const auto &[name, publish] :
@@ -205,7 +215,7 @@ int main(int argc, char **argv)
 	}
 	std::printf("\nlatency = t_publish - t_host (capture complete on the host -> message handed to the socket);\n"
 		    "ring/pool = frames dropped by drop-oldest / for want of a free frame; stage columns: mean ms per "
-		    "frame.\n");
+		    "frame (flow: the image scaling and the dense flow).\n");
 	for (const auto &[name, r] : dds_rows)
 		if (r.dds)
 			std::printf("%s: DDS publishing %.3f ms mean, %.3f ms max per frame (3 messages, on the "

@@ -4,6 +4,7 @@
 # heading errors, id switches; then the dynamic-label precision / recall / F1 with groups.label_points off and
 # on. One table row per scene.
 #   tools/eval_groups_sim.sh BUILD_DIR [FRAMES=150] [SCENE...]   (scenes: default moving_many walk)
+# Further settings for every run in EXTRA, e.g. EXTRA="--set groups.flow=lk".
 set -euo pipefail
 BUILD=$1 FRAMES=${2:-150}
 shift $(($# > 2 ? 2 : $#))
@@ -17,7 +18,7 @@ labels_table="| scene | label_points | label precision | recall | F1 | groups ms
 for scene in "${SCENES[@]}"; do
 	for lp in false true; do
 		"$BUILD/daemon/stereod" process -i sim -f sim -o "$WORK/out.ndjson" --no-progress --set sim.frames="$FRAMES" \
-			--set sim.scene="$scene" --set sim.depth=true --set groups.label_points=$lp \
+			--set sim.scene="$scene" --set sim.depth=true --set groups.label_points=$lp ${EXTRA:-} \
 			--truth-dir "$WORK/truth" >/dev/null 2>&1
 		if [ $lp = false ]; then
 			table=$("$BUILD/tools/stereoctl" eval --groups --results "$WORK/out.ndjson" --truth "$WORK/truth" --name "$scene")

@@ -377,11 +377,31 @@ void draw_points(cv::Mat &image, const FrameResult &result, bool arrows)
 		const int radius = p.label == PointLabel::Uncertain ? 2 : 4;
 		cv::circle(image, at, radius, colour, p.label == PointLabel::Uncertain ? 1 : cv::FILLED, cv::LINE_AA);
 	}
+	// Groups: box and id in a colour of their own (stable per id), the image velocity as an arrow from the
+	// box's centre (the motion over half a second), and the speed where it was measured.
+	for (const auto &g : result.groups) {
+		const cv::Scalar colour((g.id * 67) % 200 + 55, (g.id * 151) % 200 + 55, 40);
+		const cv::Point2f a(g.box_px[0], g.box_px[1]), b(g.box_px[2], g.box_px[3]);
+		cv::rectangle(image, a, b, colour, 2, cv::LINE_AA);
+		const cv::Point2f centre = (a + b) * 0.5f;
+		const cv::Point2f velocity(static_cast<float>(g.image_velocity_pxps[0]),
+					   static_cast<float>(g.image_velocity_pxps[1]));
+		cv::arrowedLine(image, centre, centre + velocity * 0.5f, colour, 2, cv::LINE_AA, 0, 0.25);
+		std::string label = "#" + std::to_string(g.id);
+		if (g.speed_mps) {
+			char speed[32];
+			std::snprintf(speed, sizeof speed, " %.1f m/s", *g.speed_mps);
+			label += speed;
+		}
+		cv::putText(image, label, a + cv::Point2f(2, -4), cv::FONT_HERSHEY_SIMPLEX, 0.45, colour, 1,
+			    cv::LINE_AA);
+	}
 	int s = 0, d = 0, u = 0;
 	for (const auto &p : result.points)
 		(p.label == PointLabel::Static ? s : p.label == PointLabel::Dynamic ? d : u)++;
 	const std::string text = "seq " + std::to_string(result.seq) + "  static " + std::to_string(s) + "  dynamic " +
-				 std::to_string(d) + "  uncertain " + std::to_string(u);
+				 std::to_string(d) + "  uncertain " + std::to_string(u) + "  groups " +
+				 std::to_string(result.groups.size());
 	cv::rectangle(image, cv::Rect(0, 0, image.cols, 26), cv::Scalar(0, 0, 0), cv::FILLED);
 	cv::putText(image, text, cv::Point(8, 18), cv::FONT_HERSHEY_SIMPLEX, 0.55, cv::Scalar(255, 255, 255), 1,
 		    cv::LINE_AA);

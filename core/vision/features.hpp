@@ -38,6 +38,8 @@ struct FrameFeatures {
 	std::optional<StereoSummary> stereo; ///< how the stereo matching went, when it ran
 	/// The left image in grey (owned, not a pool buffer), for sub-pixel refinement of the temporal matches.
 	cv::Mat grey;
+	/// The grey left image scaled for the dense flow (dense_motion.hpp), when the groups use it.
+	cv::Mat flow_image;
 	/// The person prior's detections in this frame; nothing when the detector did not run on it.
 	std::optional<std::vector<PriorRegion>> people;
 };

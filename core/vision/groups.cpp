@@ -32,7 +32,7 @@ struct Cluster {
 };
 
 Cluster measure(std::vector<uint32_t> members, const std::vector<MotionPoint> &points,
-		const GroupMotionContext &context)
+		const GroupMotionContext &context, float margin)
 {
 	Cluster c;
 	c.members = std::move(members);
@@ -70,7 +70,7 @@ Cluster measure(std::vector<uint32_t> members, const std::vector<MotionPoint> &p
 			}
 		}
 	}
-	c.box = cv::Rect2f(u0, v0, u1 - u0, v1 - v0);
+	c.box = cv::Rect2f(u0 - margin, v0 - margin, u1 - u0 + 2 * margin, v1 - v0 + 2 * margin);
 	c.centre = {median_of(u), median_of(v)};
 	c.flow = {median_of(fu), median_of(fv)};
 	c.residual = {median_of(ru), median_of(rv)};
@@ -95,6 +95,54 @@ template <typename T>
 T blend(const std::optional<T> &old, const T &now, double weight)
 {
 	return old ? T(*old * (1 - weight) + now * weight) : now;
+}
+
+cv::Point2f median_residual(const std::vector<uint32_t> &members, const std::vector<MotionPoint> &points)
+{
+	std::vector<float> ru, rv;
+	for (const uint32_t i : members) {
+		ru.push_back(points[i].residual.x);
+		rv.push_back(points[i].residual.y);
+	}
+	return {median_of(ru), median_of(rv)};
+}
+
+/// Clusters whose boxes touch (within merge_gap_px) and that move alike (the join rule on their median
+/// residuals) are one: Affinity Propagation over a dense grid, whose exemplars only reach their nearest
+/// samples, cuts a large mover into pieces.
+void merge_touching(std::vector<std::vector<uint32_t>> &clusters, const std::vector<MotionPoint> &points,
+		    const GroupParams &params)
+{
+	bool merged = true;
+	while (merged && clusters.size() > 1) {
+		merged = false;
+		std::vector<cv::Rect2f> boxes;
+		std::vector<cv::Point2f> motion;
+		for (const auto &members : clusters) {
+			float u0 = 1e9f, v0 = 1e9f, u1 = -1e9f, v1 = -1e9f;
+			for (const uint32_t i : members) {
+				u0 = std::min(u0, points[i].px.x);
+				v0 = std::min(v0, points[i].px.y);
+				u1 = std::max(u1, points[i].px.x);
+				v1 = std::max(v1, points[i].px.y);
+			}
+			const auto gap = static_cast<float>(params.box_margin_px + 0.5 * params.merge_gap_px);
+			boxes.emplace_back(u0 - gap, v0 - gap, u1 - u0 + 2 * gap, v1 - v0 + 2 * gap);
+			motion.push_back(median_residual(members, points));
+		}
+		for (size_t a = 0; a < clusters.size() && !merged; ++a)
+			for (size_t b = a + 1; b < clusters.size() && !merged; ++b) {
+				if ((boxes[a] & boxes[b]).area() <= 0)
+					continue;
+				const double strength = std::max(cv::norm(motion[a]), cv::norm(motion[b]));
+				const double off = cv::norm(motion[a] - motion[b]);
+				if (off <= std::max(params.label_tolerance_px, 0.5 * strength)) {
+					clusters[a].insert(clusters[a].end(), clusters[b].begin(), clusters[b].end());
+					clusters.erase(clusters.begin() + static_cast<std::ptrdiff_t>(b));
+					merged = true;
+				}
+			}
+	}
 }
 
 } // namespace
@@ -131,12 +179,35 @@ std::vector<uint32_t> strong_motion(const std::vector<MotionPoint> &points, cons
 	return strong;
 }
 
+void join_groups(const std::vector<MotionPoint> &points, const GroupOutput &found, const GroupParams &params,
+		 std::vector<int> &group_of_point)
+{
+	for (size_t g = 0; g < found.groups.size() && g < found.residuals.size(); ++g) {
+		const cv::Point2f group_residual = found.residuals[g];
+		const double strength = cv::norm(group_residual);
+		if (strength < params.min_flow_px)
+			continue;
+		const auto &b = found.groups[g].box_px;
+		const double tolerance = std::max(params.label_tolerance_px, 0.5 * strength);
+		for (size_t i = 0; i < points.size() && i < group_of_point.size(); ++i) {
+			const MotionPoint &p = points[i];
+			if (group_of_point[i] >= 0 ||
+			    !(p.px.x >= b[0] && p.px.x <= b[2] && p.px.y >= b[1] && p.px.y <= b[3]))
+				continue;
+			const double off = cv::norm(p.residual - group_residual); // NaN residuals never join
+			if (off <= tolerance && off < cv::norm(p.residual))
+				group_of_point[i] = static_cast<int>(g);
+		}
+	}
+}
+
 GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemory *previous,
-			const GroupMotionContext &context, const GroupParams &params, AffinityPropagation &workspace)
+			const GroupMotionContext &context, const GroupParams &params, AffinityPropagation &workspace,
+			const std::vector<uint32_t> *strong)
 {
 	GroupOutput out;
 	out.group_of_point.assign(points.size(), -1);
-	out.strong = strong_motion(points, params);
+	out.strong = strong != nullptr ? *strong : strong_motion(points, params);
 	// An even subsample beyond the cap keeps the clustering's cost bounded whatever the scene.
 	std::vector<uint32_t> chosen = out.strong;
 	if (params.max_points > 0 && chosen.size() > static_cast<size_t>(params.max_points)) {
@@ -169,9 +240,29 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 		std::vector<std::vector<uint32_t>> by_exemplar(chosen.size());
 		for (size_t s = 0; s < chosen.size(); ++s)
 			by_exemplar[static_cast<size_t>(ap.exemplar[s])].push_back(chosen[s]);
-		for (auto &members : by_exemplar)
-			if (members.size() >= static_cast<size_t>(std::max(1, params.min_points)))
-				clusters.push_back(measure(std::move(members), points, context));
+		const auto min_points = static_cast<size_t>(std::max(1, params.min_points));
+		std::vector<std::vector<uint32_t>> kept;
+		for (auto &members : by_exemplar) {
+			if (members.size() < min_points)
+				continue;
+			// Members that do not move like the cluster's median (a flow that bled onto the background
+			// around a mover, a stray point the clustering took along) leave it, by the rule points join
+			// a group by (join_groups), so that the box and the velocities are the movers'.
+			const cv::Point2f median = median_residual(members, points);
+			const double strength = cv::norm(median);
+			const double tolerance = std::max(params.label_tolerance_px, 0.5 * strength);
+			std::erase_if(members, [&](uint32_t i) {
+				const double off = cv::norm(points[i].residual - median);
+				return !(off <= tolerance && off < cv::norm(points[i].residual));
+			});
+			if (members.size() >= min_points)
+				kept.push_back(std::move(members));
+		}
+		if (params.merge_gap_px >= 0)
+			merge_touching(kept, points, params);
+		for (auto &members : kept)
+			clusters.push_back(
+				measure(std::move(members), points, context, static_cast<float>(params.box_margin_px)));
 	}
 
 	// Tracks: each previous group predicted forward by its image velocity; greedy one-to-one by distance.
@@ -247,16 +338,12 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 		}
 		const int index = static_cast<int>(out.groups.size());
 		out.groups.push_back(published);
+		out.residuals.push_back(cluster.residual);
 		for (const uint32_t i : cluster.members)
 			out.group_of_point[i] = index;
-		// Points inside the box moving with the group belong to it too (they may have missed the strong set).
-		const double tolerance = std::max(params.label_tolerance_px, 0.5 * cv::norm(cluster.residual));
-		for (size_t i = 0; i < points.size(); ++i)
-			if (out.group_of_point[i] < 0 && g.box.contains(points[i].px) &&
-			    cv::norm(points[i].residual - cluster.residual) <= tolerance &&
-			    cv::norm(cluster.residual) >= params.min_flow_px)
-				out.group_of_point[i] = index;
 	}
+	// Points inside a box moving with its group belong to it too (they may have missed the strong set).
+	join_groups(points, out, params, out.group_of_point);
 	// Groups not seen this frame are remembered a little while, so a short occlusion keeps the id.
 	for (size_t t = 0; t < before.size(); ++t)
 		if (!track_taken[t] && before[t].missed_frames < params.max_missed_frames) {

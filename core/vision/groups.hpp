@@ -39,6 +39,8 @@ struct GroupParams {
 	double octave_scale = 2;
 	int max_points = 300; ///< strong points clustered per frame at most (an even subsample beyond)
 	int min_points = 5;   ///< smaller clusters are not groups
+	/// Clusters whose boxes come this close (pixels) and that move alike are merged; negative: never.
+	double merge_gap_px = 8;
 	AffinityParams affinity;
 	/// Tracks: a group is matched to the nearest predicted group centre within this distance (or half its
 	/// box's diagonal if larger), kept unseen this many frames, published from this age on.
@@ -48,8 +50,11 @@ struct GroupParams {
 	double smoothing = 0.5; ///< weight of the new measurement in the velocity averages
 	/// Labels: a point inside a published group's box whose residual agrees with the group's (within the
 	/// larger of this and half the group's residual) becomes dynamic.
-	bool label_points = false;
+	bool label_points = true;
 	double label_tolerance_px = 1.0;
+	/// Added around the members' extent to make a group's box (the pipeline's: half a cell when the members
+	/// are the dense flow's grid cells, whose positions are the cells' centres).
+	double box_margin_px = 0;
 };
 
 /// One temporally matched point as the grouping sees it.
@@ -90,10 +95,11 @@ struct GroupMotionContext {
 
 struct GroupOutput {
 	GroupMemory memory;
-	std::vector<TargetGroup> groups; ///< the published ones
-	std::vector<uint32_t> strong;	 ///< indices of the strongly moving points
-	std::vector<int> group_of_point; ///< per point: index into `groups`, or -1
-	int clusters = 0;		 ///< AP clusters this frame (before the size and age rules)
+	std::vector<TargetGroup> groups;    ///< the published ones
+	std::vector<uint32_t> strong;	    ///< indices of the strongly moving points
+	std::vector<int> group_of_point;    ///< per point: index into `groups`, or -1
+	std::vector<cv::Point2f> residuals; ///< per published group: its members' median residual
+	int clusters = 0;		    ///< AP clusters this frame (before the size and age rules)
 	int ap_iterations = 0;
 };
 
@@ -102,9 +108,19 @@ struct GroupOutput {
 /// a residual. Auto is the pipeline's to resolve per frame (motion_stages); here it splits as Flow.
 std::vector<uint32_t> strong_motion(const std::vector<MotionPoint> &points, const GroupParams &params);
 
+/// Points inside a published group's box that move with it join it (group_of_point, which must have one
+/// entry per point; points already in a group keep theirs): the point's residual r and the group's g must
+/// satisfy |r - g| <= max(label_tolerance_px, |g| / 2) and |r - g| < |r| (nearer the group's motion than the
+/// static scene's), with |g| >= min_flow_px. `points` may be other points than the ones clustered (the
+/// feature points, when the groups came from the dense flow's cells).
+void join_groups(const std::vector<MotionPoint> &points, const GroupOutput &found, const GroupParams &params,
+		 std::vector<int> &group_of_point);
+
 /// Groups of this frame from its points and the previous frame's memory (null on the first frame).
 /// `workspace` keeps Affinity Propagation's buffers between calls.
+/// `strong`, when given, replaces strong_motion's choice (the dense flow's cells, thinned to regions).
 GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemory *previous,
-			const GroupMotionContext &context, const GroupParams &params, AffinityPropagation &workspace);
+			const GroupMotionContext &context, const GroupParams &params, AffinityPropagation &workspace,
+			const std::vector<uint32_t> *strong = nullptr);
 
 } // namespace stereod::vision

@@ -5,6 +5,7 @@
 #include <limits>
 
 #include <opencv2/imgproc.hpp>
+#include <opencv2/video/tracking.hpp>
 
 #include "core/stage_timer.hpp"
 
@@ -175,6 +176,10 @@ FrameFeatures extract_stage(const StereoFrame &frame, const MotionParams &params
 		if (params.matching.subpixel)
 			// A grey frame's image is a pool buffer that the next capture overwrites: keep a copy.
 			features.grey = grey.data == frame.left.data ? grey.clone() : grey;
+	}
+	if (params.groups.enabled && params.dense.method != GroupFlow::Sparse) {
+		StageTimer timer(timing, "flow_image");
+		features.flow_image = dense_flow_image(grey, params.dense);
 	}
 	if (params.prior.enabled &&
 	    frame.sequence % static_cast<uint64_t>(std::max(params.prior.every_n_frames, 1)) == 0) {
@@ -420,6 +425,14 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 			own_motion(pairs[i], i < predicted.size() ? predicted[i] : cv::Point2f(kNaN, kNaN),
 				   classification.homography);
 	std::vector<int> group_of_point; // per match: the published group it moves with, or -1
+	// Seed 002's global flow, when the groups take their members from it.
+	std::optional<CellFlow> cells;
+	if (params.groups.enabled && params.dense.method != GroupFlow::Sparse && !prev->flow_image.empty() &&
+	    !cur.flow_image.empty()) {
+		StageTimer flow_timer(result.timing, "flow");
+		thread_local cv::Ptr<cv::DISOpticalFlow> dis; // kept per worker: made once
+		cells = dense_flow(prev->flow_image, cur.flow_image, frame.left.size(), params.dense, dis);
+	}
 	if (params.groups.enabled) {
 		StageTimer groups_timer(result.timing, "groups");
 		// Each point's motion against what the static scene would do: the pose's prediction (stereo), else
@@ -459,8 +472,35 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 		GroupParams group_params = params.groups;
 		if (group_params.members == GroupMembers::Auto)
 			group_params.members = moved ? GroupMembers::Labels : GroupMembers::Flow;
-		GroupOutput found = find_groups(motion, prev_tracks != nullptr ? &prev_tracks->groups : nullptr,
-						context, group_params, workspace);
+		const GroupMemory *memory = prev_tracks != nullptr ? &prev_tracks->groups : nullptr;
+		GroupOutput found;
+		if (cells) {
+			// Seed 002's global flow: the grid's cells are the members (split by the mean residual), and
+			// the feature points inside a group's box that move with it join it.
+			StaticSceneModel model;
+			model.homography = classification.homography;
+			if (moved)
+				model.curr_from_prev = pose->curr_from_prev;
+			model.rig = params.rig;
+			std::vector<float> prev_depth, cur_depth;
+			if (params.rig) {
+				prev_depth =
+					cell_depths(prev->keypoints, prev->xyz, cells->cols, cells->rows, params.dense);
+				cur_depth = cell_depths(cur.keypoints, cur.xyz, cells->cols, cells->rows, params.dense);
+			}
+			const std::vector<MotionPoint> cell_points =
+				cell_motion(*cells, params.dense, prev_depth, cur_depth, model);
+			group_params.members = GroupMembers::Flow;
+			group_params.box_margin_px = 0.5 * params.dense.step_px;
+			const std::vector<uint32_t> strong =
+				supported_cells(strong_motion(cell_points, group_params), cells->cols, cells->rows,
+						params.dense.min_strong_neighbours);
+			found = find_groups(cell_points, memory, context, group_params, workspace, &strong);
+			found.group_of_point.assign(n, -1);
+			join_groups(motion, found, group_params, found.group_of_point);
+		} else {
+			found = find_groups(motion, memory, context, group_params, workspace);
+		}
 		group_of_point = std::move(found.group_of_point);
 		tracks.groups = std::move(found.memory);
 		result.groups = std::move(found.groups);

@@ -17,6 +17,7 @@
 #include "core/geometry/rig.hpp"
 #include "core/result.hpp"
 #include "core/vision/classifier.hpp"
+#include "core/vision/dense_motion.hpp"
 #include "core/vision/ego.hpp"
 #include "core/vision/features.hpp"
 #include "core/vision/keyframes.hpp"
@@ -38,6 +39,7 @@ struct MotionParams {
 	EgoParams ego;
 	LabelMethod label_method = LabelMethod::Combined;
 	GroupParams groups;
+	DenseFlowParams dense; ///< the flow the groups take their members from (sparse: the temporal matches)
 	PersonPriorParams prior;
 	KeyframeParams keyframes;
 	/// The source's rectified calibration; without it there is no depth and no metric pose.
