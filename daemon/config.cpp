@@ -314,10 +314,12 @@ const std::vector<Option> &options()
 			"dc1394", "frame_rate", "frame rate; 0 = the camera's",
 			[](DaemonConfig &c) -> double & { return c.source.dc1394.frame_rate; }, 0, 240));
 		// [sim]
-		o.push_back(text(
-			"sim", "scene", "default | static_near | static_far | moving_one | moving_many | toward | walk",
-			[](DaemonConfig &c) -> std::string & { return c.source.sim.scene; },
-			{"default", "static_near", "static_far", "moving_one", "moving_many", "toward", "walk"}));
+		o.push_back(
+			text("sim", "scene",
+			     "default | static_near | static_far | moving_one | moving_many | toward | walk | rotate",
+			     [](DaemonConfig &c) -> std::string & { return c.source.sim.scene; },
+			     {"default", "static_near", "static_far", "moving_one", "moving_many", "toward", "walk",
+			      "rotate"}));
 		o.push_back(number(
 			"sim", "seed", "random seed: same seed, same frames",
 			[](DaemonConfig &c) -> uint64_t & { return c.source.sim.seed; }, 0, 4e9));
@@ -621,6 +623,13 @@ const std::vector<Option> &options()
 			"groups", "min_strong_neighbours",
 			"lk / dis: strong cells a strong cell needs among its 8 neighbours (0: none)",
 			[](DaemonConfig &c) -> int & { return c.motion.dense.min_strong_neighbours; }, 0, 8));
+		o.push_back(number(
+			"groups", "min_cells", "lk / dis: grid cells a group needs at least",
+			[](DaemonConfig &c) -> int & { return c.motion.dense.min_cells; }, 1, 100000));
+		o.push_back(number(
+			"groups", "min_box_fill",
+			"lk / dis: fraction of a group's box its cells must cover (scattered noise is not a mover)",
+			[](DaemonConfig &c) -> double & { return c.motion.groups.min_box_fill; }, 0, 1));
 		o.push_back(number(
 			"groups", "depth_radius_cells",
 			"lk / dis: a cell's depth is the median of the stereo points within this many cells",

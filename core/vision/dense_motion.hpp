@@ -42,6 +42,9 @@ struct DenseFlowParams {
 	/// A strong cell needs this many strong cells among its 8 neighbours (a mover is a region; a lone cell
 	/// is noise); 0: no such rule.
 	int min_strong_neighbours = 2;
+	/// Cells a group needs at least (a person 20 m away at 1024x768 is ~16 cells of 8 px); groups.min_points
+	/// still applies when larger.
+	int min_cells = 12;
 	/// Depth of a cell from the stereo points within this many cells of it (their median); none beyond.
 	int depth_radius_cells = 2;
 };

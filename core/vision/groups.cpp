@@ -260,6 +260,22 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 		}
 		if (params.merge_gap_px >= 0)
 			merge_touching(kept, points, params);
+		if (params.member_area_px2 > 0) {
+			std::erase_if(kept, [&](const std::vector<uint32_t> &members) {
+				float u0 = 1e9f, v0 = 1e9f, u1 = -1e9f, v1 = -1e9f;
+				for (const uint32_t i : members) {
+					u0 = std::min(u0, points[i].px.x);
+					v0 = std::min(v0, points[i].px.y);
+					u1 = std::max(u1, points[i].px.x);
+					v1 = std::max(v1, points[i].px.y);
+				}
+				const double side =
+					std::sqrt(params.member_area_px2); // the box around the cells' centres
+				const double box = (u1 - u0 + side) * (v1 - v0 + side);
+				return static_cast<double>(members.size()) * params.member_area_px2 <
+				       params.min_box_fill * box;
+			});
+		}
 		for (auto &members : kept)
 			clusters.push_back(
 				measure(std::move(members), points, context, static_cast<float>(params.box_margin_px)));

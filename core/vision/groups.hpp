@@ -55,6 +55,11 @@ struct GroupParams {
 	/// Added around the members' extent to make a group's box (the pipeline's: half a cell when the members
 	/// are the dense flow's grid cells, whose positions are the cells' centres).
 	double box_margin_px = 0;
+	/// The pipeline's too: the image area one member stands for (a dense grid's cell, side squared; 0 for
+	/// feature points). With it a cluster must cover at least `min_box_fill` of its box: a few scattered
+	/// cells of flow noise that clustered together are not a mover, which is a region.
+	double member_area_px2 = 0;
+	double min_box_fill = 0.1;
 };
 
 /// One temporally matched point as the grouping sees it.

@@ -492,6 +492,8 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 				cell_motion(*cells, params.dense, prev_depth, cur_depth, model);
 			group_params.members = GroupMembers::Flow;
 			group_params.box_margin_px = 0.5 * params.dense.step_px;
+			group_params.member_area_px2 = static_cast<double>(params.dense.step_px) * params.dense.step_px;
+			group_params.min_points = std::max(group_params.min_points, params.dense.min_cells);
 			const std::vector<uint32_t> strong =
 				supported_cells(strong_motion(cell_points, group_params), cells->cols, cells->rows,
 						params.dense.min_strong_neighbours);

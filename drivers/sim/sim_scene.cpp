@@ -306,9 +306,13 @@ Scene::Scene(const SimConfig &config) : config_(config)
 		specs.push_back({4.0, 7.0, -1.4, 0, -4.5, 4.5, 0, 0, 0});
 		specs.push_back({0.9, 9.0, 0, -1.2, 0, 0, 3.5, 9.5, 0});
 		specs.push_back({-2.6, 6.0, 0, 0.9, 0, 0, 5.0, 11.0, 0});
+	} else if (scene == "rotate") { // no mover: the camera only turns (pans and tilts) on the spot
+		yaw_amplitude_rad_ = 6.0 * std::numbers::pi / 180;
+		pitch_amplitude_rad_ = 1.5 * std::numbers::pi / 180;
 	} else {
 		throw SourceError("sim: unknown scene '" + scene +
-				  "' (known: default, static_near, static_far, moving_one, moving_many, toward, walk)");
+				  "' (known: default, static_near, static_far, moving_one, moving_many, toward, walk, "
+				  "rotate)");
 	}
 
 	// Finely textured photographs, used at (nearly) their own resolution: people wear patterned clothes.
