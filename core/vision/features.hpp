@@ -40,6 +40,9 @@ struct FrameFeatures {
 	cv::Mat grey;
 	/// The grey left image scaled for the dense flow (dense_motion.hpp), when the groups use it.
 	cv::Mat flow_image;
+	/// Per cell of the dense flow's grid: the depth from this frame's 3D points (dense_motion.hpp); empty
+	/// without depth or dense flow.
+	std::vector<float> cell_depth;
 	/// The person prior's detections in this frame; nothing when the detector did not run on it.
 	std::optional<std::vector<PriorRegion>> people;
 };

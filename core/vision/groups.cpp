@@ -97,6 +97,27 @@ T blend(const std::optional<T> &old, const T &now, double weight)
 	return old ? T(*old * (1 - weight) + now * weight) : now;
 }
 
+/// The box around the members' positions.
+cv::Rect2f extent_of(const std::vector<uint32_t> &members, const std::vector<MotionPoint> &points)
+{
+	float u0 = 1e9f, v0 = 1e9f, u1 = -1e9f, v1 = -1e9f;
+	for (const uint32_t i : members) {
+		u0 = std::min(u0, points[i].px.x);
+		v0 = std::min(v0, points[i].px.y);
+		u1 = std::max(u1, points[i].px.x);
+		v1 = std::max(v1, points[i].px.y);
+	}
+	return {u0, v0, u1 - u0, v1 - v0};
+}
+
+/// The rule a point's residual r moves with a group's g by (join_groups): |r - g| <= max(tolerance, |g| / 2)
+/// and |r - g| < |r|, nearer the group's motion than standing still. NaN residuals never do.
+bool moves_with(cv::Point2f r, cv::Point2f g, const GroupParams &params)
+{
+	const double off = cv::norm(r - g);
+	return off <= std::max(params.label_tolerance_px, 0.5 * cv::norm(g)) && off < cv::norm(r);
+}
+
 cv::Point2f median_residual(const std::vector<uint32_t> &members, const std::vector<MotionPoint> &points)
 {
 	std::vector<float> ru, rv;
@@ -119,15 +140,9 @@ void merge_touching(std::vector<std::vector<uint32_t>> &clusters, const std::vec
 		std::vector<cv::Rect2f> boxes;
 		std::vector<cv::Point2f> motion;
 		for (const auto &members : clusters) {
-			float u0 = 1e9f, v0 = 1e9f, u1 = -1e9f, v1 = -1e9f;
-			for (const uint32_t i : members) {
-				u0 = std::min(u0, points[i].px.x);
-				v0 = std::min(v0, points[i].px.y);
-				u1 = std::max(u1, points[i].px.x);
-				v1 = std::max(v1, points[i].px.y);
-			}
+			const cv::Rect2f e = extent_of(members, points);
 			const auto gap = static_cast<float>(params.box_margin_px + 0.5 * params.merge_gap_px);
-			boxes.emplace_back(u0 - gap, v0 - gap, u1 - u0 + 2 * gap, v1 - v0 + 2 * gap);
+			boxes.emplace_back(e.x - gap, e.y - gap, e.width + 2 * gap, e.height + 2 * gap);
 			motion.push_back(median_residual(members, points));
 		}
 		for (size_t a = 0; a < clusters.size() && !merged; ++a)
@@ -188,14 +203,10 @@ void join_groups(const std::vector<MotionPoint> &points, const GroupOutput &foun
 		if (strength < params.min_flow_px)
 			continue;
 		const auto &b = found.groups[g].box_px;
-		const double tolerance = std::max(params.label_tolerance_px, 0.5 * strength);
 		for (size_t i = 0; i < points.size() && i < group_of_point.size(); ++i) {
 			const MotionPoint &p = points[i];
-			if (group_of_point[i] >= 0 ||
-			    !(p.px.x >= b[0] && p.px.x <= b[2] && p.px.y >= b[1] && p.px.y <= b[3]))
-				continue;
-			const double off = cv::norm(p.residual - group_residual); // NaN residuals never join
-			if (off <= tolerance && off < cv::norm(p.residual))
+			if (group_of_point[i] < 0 && p.px.x >= b[0] && p.px.x <= b[2] && p.px.y >= b[1] &&
+			    p.px.y <= b[3] && moves_with(p.residual, group_residual, params))
 				group_of_point[i] = static_cast<int>(g);
 		}
 	}
@@ -249,12 +260,8 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 			// around a mover, a stray point the clustering took along) leave it, by the rule points join
 			// a group by (join_groups), so that the box and the velocities are the movers'.
 			const cv::Point2f median = median_residual(members, points);
-			const double strength = cv::norm(median);
-			const double tolerance = std::max(params.label_tolerance_px, 0.5 * strength);
-			std::erase_if(members, [&](uint32_t i) {
-				const double off = cv::norm(points[i].residual - median);
-				return !(off <= tolerance && off < cv::norm(points[i].residual));
-			});
+			std::erase_if(members,
+				      [&](uint32_t i) { return !moves_with(points[i].residual, median, params); });
 			if (members.size() >= min_points)
 				kept.push_back(std::move(members));
 		}
@@ -262,16 +269,10 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 			merge_touching(kept, points, params);
 		if (params.member_area_px2 > 0) {
 			std::erase_if(kept, [&](const std::vector<uint32_t> &members) {
-				float u0 = 1e9f, v0 = 1e9f, u1 = -1e9f, v1 = -1e9f;
-				for (const uint32_t i : members) {
-					u0 = std::min(u0, points[i].px.x);
-					v0 = std::min(v0, points[i].px.y);
-					u1 = std::max(u1, points[i].px.x);
-					v1 = std::max(v1, points[i].px.y);
-				}
+				const cv::Rect2f e = extent_of(members, points);
 				const double side =
 					std::sqrt(params.member_area_px2); // the box around the cells' centres
-				const double box = (u1 - u0 + side) * (v1 - v0 + side);
+				const double box = (e.width + side) * (e.height + side);
 				return static_cast<double>(members.size()) * params.member_area_px2 <
 				       params.min_box_fill * box;
 			});

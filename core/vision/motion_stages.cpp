@@ -42,6 +42,17 @@ std::vector<cv::Vec3f> points_from_depth(const std::vector<cv::KeyPoint> &keypoi
 	return xyz;
 }
 
+/// The depth of each grid cell of the dense flow (when the groups use it), made once per frame here rather
+/// than for both frames of every pair.
+void add_cell_depths(FrameFeatures &features, cv::Size size, const MotionParams &params)
+{
+	if (!params.groups.enabled || params.dense.method == GroupFlow::Sparse)
+		return;
+	const int step = std::max(params.dense.step_px, 1);
+	features.cell_depth =
+		cell_depths(features.keypoints, features.xyz, size.width / step, size.height / step, params.dense);
+}
+
 /// Whether keypoint `p` of the previous frame was labelled dynamic or failed a geometric test there.
 bool flagged_before(const TrackSet *prev_tracks, size_t p)
 {
@@ -194,6 +205,7 @@ FrameFeatures extract_stage(const StereoFrame &frame, const MotionParams &params
 	if (!stereo && !frame.depth.empty()) {
 		StageTimer timer(timing, "depth");
 		features.xyz = points_from_depth(features.keypoints, frame.depth, *params.rig);
+		add_cell_depths(features, frame.left.size(), params);
 		return features;
 	}
 	if (!stereo)
@@ -205,6 +217,7 @@ FrameFeatures extract_stage(const StereoFrame &frame, const MotionParams &params
 	const double scale_step = params.features.detector == Detector::Orb ? params.features.orb_scale : 1.4;
 	StereoDepth depth = match_stereo(features, right, grey, right_grey, *params.rig, params.stereo, scale_step);
 	features.xyz = std::move(depth.xyz);
+	add_cell_depths(features, frame.left.size(), params);
 	features.stereo = StereoSummary{static_cast<int>(features.keypoints.size()), depth.matched, depth.candidates,
 					depth.outside_band, median_of(std::move(depth.row_differences))};
 	return features;
@@ -482,14 +495,8 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 			if (moved)
 				model.curr_from_prev = pose->curr_from_prev;
 			model.rig = params.rig;
-			std::vector<float> prev_depth, cur_depth;
-			if (params.rig) {
-				prev_depth =
-					cell_depths(prev->keypoints, prev->xyz, cells->cols, cells->rows, params.dense);
-				cur_depth = cell_depths(cur.keypoints, cur.xyz, cells->cols, cells->rows, params.dense);
-			}
 			const std::vector<MotionPoint> cell_points =
-				cell_motion(*cells, params.dense, prev_depth, cur_depth, model);
+				cell_motion(*cells, params.dense, prev->cell_depth, cur.cell_depth, model);
 			group_params.members = GroupMembers::Flow;
 			group_params.box_margin_px = 0.5 * params.dense.step_px;
 			group_params.member_area_px2 = static_cast<double>(params.dense.step_px) * params.dense.step_px;
