@@ -148,6 +148,7 @@ std::string frame_message(const FrameResult &result)
 			  round_to(group.box_px[2], 0.1), round_to(group.box_px[3], 0.1)}},
 			{"points", group.point_count},
 			{"age_frames", group.age_frames},
+			{"missed_frames", group.missed_frames},
 			{"image_velocity_pxps",
 			 {round_to(group.image_velocity_pxps[0], 0.01), round_to(group.image_velocity_pxps[1], 0.01)}}};
 		const auto put3 = [&g](const char *key, const std::optional<std::array<double, 3>> &v) {
@@ -314,6 +315,7 @@ FrameResult parse_frame_message(const json &message)
 		group.box_px = array_field<float, 4>(g.at("box_px"));
 		group.point_count = field<int>(g, "points");
 		group.age_frames = field<int>(g, "age_frames");
+		group.missed_frames = field_or<int>(g, "missed_frames", 0);
 		group.image_velocity_pxps = array_field<float, 2>(g.at("image_velocity_pxps"));
 		const auto get3 = [&g](const char *key) -> std::optional<std::array<double, 3>> {
 			if (!g.contains(key))
@@ -491,6 +493,7 @@ std::string_view frame_json_schema()
           "box_px": {"type": "array", "items": {"type": "number"}, "minItems": 4, "maxItems": 4},
           "points": {"type": "integer"},
           "age_frames": {"type": "integer"},
+          "missed_frames": {"type": "integer"},
           "image_velocity_pxps": {"type": "array", "items": {"type": "number"}},
           "position_m": {"type": "array", "items": {"type": "number"}},
           "extent_m": {"type": "array", "items": {"type": "number"}},

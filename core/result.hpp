@@ -73,6 +73,10 @@ struct TargetGroup {
 	std::array<float, 4> box_px{}; ///< u0, v0, u1, v1 in the left image
 	int point_count = 0;
 	int age_frames = 0;
+	/// 0: found in this frame. More: not found in the last this-many frames and carried on (coasted) from
+	/// where it was last seen by its velocities, for at most groups.coast_frames frames, so that a mover
+	/// the flow misses for a frame keeps its box and id.
+	int missed_frames = 0;
 	std::array<float, 2> image_velocity_pxps{}; ///< du, dv: the members' motion in the image
 	/// Where depth exists (left camera, metres): median position, 10-90 % extent, velocity relative to the
 	/// camera; with a metric pose also in the world (ego-motion removed), its speed and heading

@@ -686,6 +686,13 @@ const std::vector<Option> &options()
 			"groups", "min_age_frames", "tracks: frames a group must be seen before it is published",
 			[](DaemonConfig &c) -> int & { return c.motion.groups.min_age_frames; }, 1, 1000));
 		o.push_back(number(
+			"groups", "coast_frames",
+			"tracks: a published group not found is published on (moved by its velocities, missed_frames > "
+			"0) "
+			"for this many frames, at most max_missed_frames and no longer than it had been published; 0: "
+			"never",
+			[](DaemonConfig &c) -> int & { return c.motion.groups.coast_frames; }, 0, 1000));
+		o.push_back(number(
 			"groups", "smoothing", "tracks: weight of the new measurement in the velocity averages",
 			[](DaemonConfig &c) -> double & { return c.motion.groups.smoothing; }, 0.01, 1));
 		o.push_back(boolean("groups", "label_points", "label points inside a group moving with it dynamic",

@@ -114,15 +114,44 @@ void GroupScore::add(const FrameResult &result, const cv::Mat &mask, const std::
 		count_exact += gs.size() == movers.size() ? 1 : 0;
 	}
 	const std::vector<int> on = match_groups(gs, mask);
+	std::vector<cv::Rect> boxes;
+	boxes.reserve(gs.size());
+	for (const auto &g : gs)
+		boxes.push_back(cv::Rect(cv::Point(static_cast<int>(std::floor(g.box_px[0])),
+						   static_cast<int>(std::floor(g.box_px[1]))),
+					 cv::Point(static_cast<int>(std::ceil(g.box_px[2])) + 1,
+						   static_cast<int>(std::ceil(g.box_px[3])) + 1)) &
+				cv::Rect(0, 0, mask.cols, mask.rows));
 	for (const auto &mover : movers) {
 		++mover_views;
+		// The mover's pixels inside the union of the boxes of groups on movers, and whether any box touches it.
+		int inside = 0;
+		bool touched = false;
+		for (int y = mover.box.y; y < mover.box.y + mover.box.height; ++y) {
+			const auto *row = mask.ptr<uint8_t>(y);
+			for (int x = mover.box.x; x < mover.box.x + mover.box.width; ++x) {
+				if (row[x] != mover.id)
+					continue;
+				bool in_any = false, in_on = false;
+				for (size_t i = 0; i < boxes.size() && !in_on; ++i)
+					if (boxes[i].contains({x, y})) {
+						in_any = true;
+						in_on = on[i] != 0;
+					}
+				touched = touched || in_any;
+				inside += in_on ? 1 : 0;
+			}
+		}
+		movers_inside += inside >= inside_share * std::max(1, mover.pixels) ? 1 : 0;
 		// The group covering this mover; of several, the one with the most points.
 		const TargetGroup *best = nullptr;
 		for (size_t i = 0; i < gs.size(); ++i)
 			if (on[i] == mover.id && (best == nullptr || gs[i].point_count > best->point_count))
 				best = &gs[i];
-		if (best == nullptr)
+		if (best == nullptr) {
+			movers_untouched += touched ? 0 : 1;
 			continue;
+		}
 		++movers_covered;
 		if (!mover.metric)
 			continue;
@@ -167,13 +196,14 @@ std::string group_score_table(const std::string &name, const GroupScore &s)
 	out << std::fixed << std::setprecision(3);
 	out << "| scene | frames | separated frames | count exact | groups | on a mover | groups with no mover in view "
 	       "| "
-	       "mover views covered | centroid error m (median) | speed error (median) | speed within 10% | heading "
-	       "error deg (median) | heading within 15 deg | id switches |\n";
-	out << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+	       "mover views covered | inside a group box | untouched | centroid error m (median) | speed error "
+	       "(median) | speed within 10% | heading error deg (median) | heading within 15 deg | id switches |\n";
+	out << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
 	out << "| " << name << " | " << s.frames << " | " << s.frames_separated << " | "
 	    << ratio(s.count_exact, s.frames_separated) << " | " << s.groups << " | "
 	    << ratio(s.groups_on_movers, s.groups) << " | " << s.groups_without_movers << " | "
-	    << ratio(s.movers_covered, s.mover_views) << " | " << median(s.centroid_error_m) << " | "
+	    << ratio(s.movers_covered, s.mover_views) << " | " << ratio(s.movers_inside, s.mover_views) << " | "
+	    << ratio(s.movers_untouched, s.mover_views) << " | " << median(s.centroid_error_m) << " | "
 	    << median(s.speed_relative_error) << " | " << fraction_below(s.speed_relative_error, 0.10) << " | "
 	    << std::setprecision(1) << median(s.heading_error_deg) << " | " << std::setprecision(3)
 	    << fraction_below(s.heading_error_deg, 15.0) << " | " << s.id_switches << " |\n";

@@ -51,6 +51,13 @@ struct GroupScore {
 	uint64_t groups_on_movers = 0;
 	uint64_t mover_views = 0;    ///< (frame, mover in view) pairs
 	uint64_t movers_covered = 0; ///< of those, with a group on the mover
+	/// Of the mover views, those with at least `inside_share` of the mover's pixels inside the box of a group
+	/// that is on a mover (issue 16's "each walking person inside a group box"): unlike movers_covered, a box
+	/// around two people who walk side by side holds both.
+	uint64_t movers_inside = 0;
+	/// Of the mover views not covered, those no group box touches at all (the rest: a box reaches them but
+	/// is another mover's, or holds too little of them).
+	uint64_t movers_untouched = 0;
 	std::vector<double> centroid_error_m;
 	std::vector<double> speed_relative_error;
 	std::vector<double> heading_error_deg; ///< movers within max_heading_distance_m, moving
@@ -62,6 +69,7 @@ struct GroupScore {
 	double max_heading_distance_m = 15.0;
 	double min_heading_speed_mps = 0.3;
 	int separation_margin_px = 8;
+	double inside_share = 0.5;
 };
 
 /// The share of `values` under `limit`; NaN when empty (the median is tools::median, evaluation.hpp).

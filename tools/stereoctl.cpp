@@ -233,6 +233,8 @@ int eval_groups(const std::string &results_path, const std::string &truth_dir, c
 					    {"groups_on_movers", ratio(score.groups_on_movers, score.groups)},
 					    {"groups_without_movers", score.groups_without_movers},
 					    {"movers_covered", ratio(score.movers_covered, score.mover_views)},
+					    {"movers_inside", ratio(score.movers_inside, score.mover_views)},
+					    {"movers_untouched", ratio(score.movers_untouched, score.mover_views)},
 					    {"centroid_error_m", tools::median(score.centroid_error_m)},
 					    {"speed_relative_error", tools::median(score.speed_relative_error)},
 					    {"speed_within_10_percent",
@@ -378,16 +380,19 @@ void draw_points(cv::Mat &image, const FrameResult &result, bool arrows)
 		cv::circle(image, at, radius, colour, p.label == PointLabel::Uncertain ? 1 : cv::FILLED, cv::LINE_AA);
 	}
 	// Groups: box and id in a colour of their own (stable per id), the image velocity as an arrow from the
-	// box's centre (the motion over half a second), and the speed where it was measured.
+	// box's centre (the motion over half a second), and the speed where it was measured. A coasted group (not
+	// found in this frame, carried on by its velocity) has a thin box and a "+N" for the frames missed.
 	for (const auto &g : result.groups) {
 		const cv::Scalar colour((g.id * 67) % 200 + 55, (g.id * 151) % 200 + 55, 40);
 		const cv::Point2f a(g.box_px[0], g.box_px[1]), b(g.box_px[2], g.box_px[3]);
-		cv::rectangle(image, a, b, colour, 2, cv::LINE_AA);
+		cv::rectangle(image, a, b, colour, g.missed_frames > 0 ? 1 : 2, cv::LINE_AA);
 		const cv::Point2f centre = (a + b) * 0.5f;
 		const cv::Point2f velocity(static_cast<float>(g.image_velocity_pxps[0]),
 					   static_cast<float>(g.image_velocity_pxps[1]));
 		cv::arrowedLine(image, centre, centre + velocity * 0.5f, colour, 2, cv::LINE_AA, 0, 0.25);
 		std::string label = "#" + std::to_string(g.id);
+		if (g.missed_frames > 0)
+			label += " +" + std::to_string(g.missed_frames);
 		if (g.speed_mps) {
 			char speed[32];
 			std::snprintf(speed, sizeof speed, " %.1f m/s", *g.speed_mps);

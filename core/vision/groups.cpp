@@ -112,6 +112,24 @@ cv::Rect2f extent_of(const std::vector<uint32_t> &members, const std::vector<Mot
 
 /// The rule a point's residual r moves with a group's g by (join_groups): |r - g| <= max(tolerance, |g| / 2)
 /// and |r - g| < |r|, nearer the group's motion than standing still. NaN residuals never do.
+/// A group not found in this frame as published: where it was last published, moved on by its image
+/// velocity and (camera-frame) velocity for the frames it has been missed; no members of its own.
+TargetGroup coasted(const TrackedGroup &track, double dt_s)
+{
+	TargetGroup g = *track.published;
+	const double elapsed = dt_s * track.missed_frames;
+	const auto du = static_cast<float>(track.image_velocity_pxps.x * elapsed);
+	const auto dv = static_cast<float>(track.image_velocity_pxps.y * elapsed);
+	g.box_px = {g.box_px[0] + du, g.box_px[1] + dv, g.box_px[2] + du, g.box_px[3] + dv};
+	if (g.position_m && g.velocity_mps)
+		for (size_t k = 0; k < 3; ++k)
+			(*g.position_m)[k] += (*g.velocity_mps)[k] * elapsed;
+	g.point_count = 0;
+	g.age_frames += track.missed_frames;
+	g.missed_frames = track.missed_frames;
+	return g;
+}
+
 bool moves_with(cv::Point2f r, cv::Point2f g, const GroupParams &params)
 {
 	const double off = cv::norm(r - g);
@@ -332,9 +350,10 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 		if (cluster.world_velocity)
 			g.world_velocity_mps = blend(old != nullptr ? old->world_velocity_mps : std::nullopt,
 						     *cluster.world_velocity, params.smoothing);
-		out.memory.groups.push_back(g);
-		if (g.age_frames < params.min_age_frames)
+		if (g.age_frames < params.min_age_frames) {
+			out.memory.groups.push_back(g);
 			continue;
+		}
 		TargetGroup published;
 		published.id = g.id;
 		published.box_px = {g.box.x, g.box.y, g.box.x + g.box.width, g.box.y + g.box.height};
@@ -353,21 +372,32 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 			published.speed_mps = cv::norm(w);
 			published.heading_rad = std::atan2(w[0], w[2]);
 		}
+		g.published = published;
+		g.residual = cluster.residual;
+		out.memory.groups.push_back(g);
 		const int index = static_cast<int>(out.groups.size());
 		out.groups.push_back(published);
 		out.residuals.push_back(cluster.residual);
 		for (const uint32_t i : cluster.members)
 			out.group_of_point[i] = index;
 	}
-	// Points inside a box moving with its group belong to it too (they may have missed the strong set).
-	join_groups(points, out, params, out.group_of_point);
-	// Groups not seen this frame are remembered a little while, so a short occlusion keeps the id.
+	// Groups not seen this frame are remembered a little while, so a short occlusion keeps the id; a
+	// published one is published on for coast_frames, where its velocities take it.
 	for (size_t t = 0; t < before.size(); ++t)
 		if (!track_taken[t] && before[t].missed_frames < params.max_missed_frames) {
 			TrackedGroup kept = before[t];
 			++kept.missed_frames;
 			out.memory.groups.push_back(kept);
+			// No longer than it had been published for: a patch of flow noise that clustered for a frame
+			// or two is not carried on as long as a mover followed for a second.
+			if (kept.published && kept.missed_frames <= params.coast_frames &&
+			    kept.missed_frames <= kept.published->age_frames - params.min_age_frames) {
+				out.groups.push_back(coasted(kept, context.dt_s));
+				out.residuals.push_back(kept.residual);
+			}
 		}
+	// Points inside a box moving with its group belong to it too (they may have missed the strong set).
+	join_groups(points, out, params, out.group_of_point);
 	return out;
 }
 

@@ -47,6 +47,10 @@ struct GroupParams {
 	double association_px = 60;
 	int max_missed_frames = 3;
 	int min_age_frames = 2;
+	/// A published group not found in a frame is still published for this many frames (at most
+	/// max_missed_frames, and no more frames than it had been published for), moved on by its velocities
+	/// and marked with missed_frames; 0: never.
+	int coast_frames = 2;
 	double smoothing = 0.5; ///< weight of the new measurement in the velocity averages
 	/// Labels: a point inside a published group's box whose residual agrees with the group's (within the
 	/// larger of this and half the group's residual) becomes dynamic.
@@ -83,6 +87,10 @@ struct TrackedGroup {
 	cv::Point2f image_velocity_pxps;
 	std::optional<cv::Vec3d> world_velocity_mps;
 	std::optional<cv::Vec3d> velocity_mps;
+	/// As last published (found in a frame and old enough), for coasting; and the members' median residual
+	/// then, for the points joining a coasted group.
+	std::optional<TargetGroup> published;
+	cv::Point2f residual;
 };
 
 struct GroupMemory {

@@ -296,4 +296,30 @@ TEST(GroupEvaluation, PixelsOnlyReferenceScoresCountsAndCoverage)
 	EXPECT_EQ(score.id_switches, 0U) << "mask ids of a pixels-only reference are per frame";
 	EXPECT_TRUE(score.centroid_error_m.empty());
 	EXPECT_TRUE(score.speed_relative_error.empty());
+	EXPECT_EQ(score.movers_inside, 3U);
+	EXPECT_EQ(score.movers_untouched, 1U) << "mover 2 in the first frame: no box reaches it";
+}
+
+// "Inside a group box" counts a mover whose pixels lie mostly in the box of a group on a mover even when that
+// group is another mover's (two people side by side in one box); a box that only clips a mover, or is on
+// the background, does not count, and a mover no box reaches is counted apart.
+TEST(GroupEvaluation, MoversInsideABoxAndUntouched)
+{
+	cv::Mat mask(240, 480, CV_8UC1, cv::Scalar(0));
+	mask(cv::Rect(100, 50, 40, 100)).setTo(1); // 4000 px
+	mask(cv::Rect(150, 60, 30, 80)).setTo(2);  // 2400 px, beside mover 1
+	mask(cv::Rect(300, 60, 40, 100)).setTo(3);
+	mask(cv::Rect(400, 20, 30, 60)).setTo(4);
+	const auto movers =
+		tools::visible_movers(mask, nlohmann::json::parse(R"({"seq":1,"mask":"masks/000001.png"})"), 400);
+	ASSERT_EQ(movers.size(), 4U);
+	tools::GroupScore score;
+	FrameResult frame;
+	frame.groups = {group_at(1, {98, 48, 84, 104}, 1, 0, {0, 0, 5}),  // both 1 and 2: 1's by the most pixels
+			group_at(2, {300, 60, 40, 30}, 1, 0, {0, 0, 5})}; // the top 30 % of mover 3
+	score.add(frame, mask, movers);
+	EXPECT_EQ(score.mover_views, 4U);
+	EXPECT_EQ(score.movers_covered, 2U) << "movers 1 and 3";
+	EXPECT_EQ(score.movers_inside, 2U) << "movers 1 and 2, not 3 (30 % inside)";
+	EXPECT_EQ(score.movers_untouched, 1U) << "mover 4; mover 2 is reached by 1's box";
 }

@@ -1,4 +1,5 @@
 // Affinity Propagation and the grouping of moving points, on constructed data with known answers.
+#include <array>
 #include <random>
 
 #include <gtest/gtest.h>
@@ -162,6 +163,72 @@ TEST(Groups, IdsSurviveTwoGroupsCrossing)
 		// No background point is called part of a group.
 		for (size_t i = 0; i < 120; ++i)
 			EXPECT_EQ(out.group_of_point[i], -1) << "background point " << i << " in frame " << frame;
+	}
+}
+
+TEST(Groups, AMissedGroupCoastsOnItsVelocityKeepingItsId)
+{
+	// Group A of the crossing scene alone (B's points dropped), seen for 6 frames, then missing from the
+	// points for 3 frames, then seen again.
+	std::mt19937 rng(5);
+	GroupParams params; // coast_frames 2, max_missed_frames 3
+	AffinityPropagation workspace;
+	GroupMemory memory;
+	GroupMotionContext context;
+	context.dt_s = 0.1;
+	int id = 0;
+	std::array<float, 4> last_box{};
+	for (int frame = 0; frame < 11; ++frame) {
+		auto points = crossing_frame(frame, rng);
+		points.resize(140); // background and A
+		const bool missing = frame >= 6 && frame <= 8;
+		if (missing)
+			points.resize(120);
+		GroupOutput out = find_groups(points, frame == 0 ? nullptr : &memory, context, params, workspace);
+		memory = out.memory;
+		if (frame == 0)
+			continue;
+		const int missed = missing ? frame - 5 : 0;
+		if (missed > params.coast_frames) {
+			EXPECT_TRUE(out.groups.empty()) << "coasted past coast_frames, frame " << frame;
+			continue;
+		}
+		ASSERT_EQ(out.groups.size(), 1u) << "frame " << frame;
+		const TargetGroup &g = out.groups[0];
+		if (frame == 1)
+			id = g.id;
+		EXPECT_EQ(g.id, id) << "frame " << frame;
+		EXPECT_EQ(g.missed_frames, missed) << "frame " << frame;
+		if (missed > 0) {
+			// Where its 60 px/s take it: 6 px per missed frame from the last box it was found with.
+			EXPECT_EQ(g.point_count, 0);
+			EXPECT_NEAR(g.box_px[0] - last_box[0], 6.f * static_cast<float>(missed), 1.5f);
+			EXPECT_NEAR(g.box_px[1], last_box[1], 0.5f);
+			// No background point joins a coasted group that moves unlike it.
+			for (size_t i = 0; i < 120; ++i)
+				EXPECT_EQ(out.group_of_point[i], -1) << "frame " << frame;
+		} else {
+			EXPECT_EQ(g.point_count, 20) << "frame " << frame;
+			last_box = g.box_px;
+		}
+	}
+}
+
+TEST(Groups, ANoiseGroupSeenBrieflyDoesNotCoast)
+{
+	// Published at its first publishable age (min_age_frames) and then gone: it is not carried on.
+	std::mt19937 rng(5);
+	GroupParams params;
+	AffinityPropagation workspace;
+	GroupMemory memory;
+	GroupMotionContext context;
+	context.dt_s = 0.1;
+	for (int frame = 0; frame < 4; ++frame) {
+		auto points = crossing_frame(frame, rng);
+		points.resize(frame < params.min_age_frames ? 140 : 120);
+		GroupOutput out = find_groups(points, frame == 0 ? nullptr : &memory, context, params, workspace);
+		memory = out.memory;
+		EXPECT_EQ(out.groups.size(), frame == params.min_age_frames - 1 ? 1u : 0u) << "frame " << frame;
 	}
 }
 

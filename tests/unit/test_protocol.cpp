@@ -108,6 +108,7 @@ TEST(Protocol, GroupsRoundTripWithDepthFieldsOnlyWhereMeasured)
 	image_only.image_velocity_pxps = {-35.5F, 2.25F};
 	TargetGroup metric = image_only;
 	metric.id = 5;
+	metric.missed_frames = 2;
 	metric.position_m = std::array<double, 3>{1.5, 0.25, 7.125};
 	metric.extent_m = std::array<double, 3>{0.5, 1.75, 0.375};
 	metric.velocity_mps = std::array<double, 3>{-1.25, 0, 0.5};
@@ -124,6 +125,8 @@ TEST(Protocol, GroupsRoundTripWithDepthFieldsOnlyWhereMeasured)
 	EXPECT_EQ(back.groups[0].id, 4);
 	EXPECT_EQ(back.groups[0].point_count, 17);
 	EXPECT_EQ(back.groups[0].age_frames, 9);
+	EXPECT_EQ(back.groups[0].missed_frames, 0);
+	EXPECT_EQ(back.groups[1].missed_frames, 2);
 	EXPECT_FLOAT_EQ(back.groups[0].box_px[3], 220.3F); // rounded to 0.1 px
 	EXPECT_FLOAT_EQ(back.groups[0].image_velocity_pxps[0], -35.5F);
 	EXPECT_FALSE(back.groups[0].position_m.has_value());
