@@ -662,6 +662,17 @@ const std::vector<Option> &options()
 			"clusters whose boxes come this close (pixels) and move alike are merged (negative: never)",
 			[](DaemonConfig &c) -> double & { return c.motion.groups.merge_gap_px; }, -1, 10000));
 		o.push_back(number(
+			"groups", "split_gap_cells",
+			"lk / dis: a cluster is cut into connected regions of cells at most this many empty cells "
+			"apart "
+			"(negative: not cut)",
+			[](DaemonConfig &c) -> int & { return c.motion.groups.split_gap_cells; }, -1, 1000));
+		o.push_back(number(
+			"groups", "split_same_depth",
+			"lk / dis: regions of a cut cluster whose median depths agree within this share of the nearer "
+			"stay one (0: depth not looked at)",
+			[](DaemonConfig &c) -> double & { return c.motion.groups.split_same_depth; }, 0, 10));
+		o.push_back(number(
 			"groups", "neighbours", "Affinity Propagation: messages to this many nearest samples",
 			[](DaemonConfig &c) -> int & { return c.motion.groups.affinity.neighbours; }, 1, 10000));
 		o.push_back(number(

@@ -110,8 +110,6 @@ cv::Rect2f extent_of(const std::vector<uint32_t> &members, const std::vector<Mot
 	return {u0, v0, u1 - u0, v1 - v0};
 }
 
-/// The rule a point's residual r moves with a group's g by (join_groups): |r - g| <= max(tolerance, |g| / 2)
-/// and |r - g| < |r|, nearer the group's motion than standing still. NaN residuals never do.
 /// A group not found in this frame as published: where it was last published, moved on by its image
 /// velocity and (camera-frame) velocity for the frames it has been missed; no members of its own.
 TargetGroup coasted(const TrackedGroup &track, double dt_s)
@@ -124,12 +122,13 @@ TargetGroup coasted(const TrackedGroup &track, double dt_s)
 	if (g.position_m && g.velocity_mps)
 		for (size_t k = 0; k < 3; ++k)
 			(*g.position_m)[k] += (*g.velocity_mps)[k] * elapsed;
-	g.point_count = 0;
-	g.age_frames += track.missed_frames;
+	g.point_count = 0; // age_frames stays: the frames it was found in
 	g.missed_frames = track.missed_frames;
 	return g;
 }
 
+/// The rule a point's residual r moves with a group's g by (join_groups): |r - g| <= max(tolerance, |g| / 2)
+/// and |r - g| < |r|, nearer the group's motion than standing still. NaN residuals never do.
 bool moves_with(cv::Point2f r, cv::Point2f g, const GroupParams &params)
 {
 	const double off = cv::norm(r - g);
@@ -144,6 +143,69 @@ cv::Point2f median_residual(const std::vector<uint32_t> &members, const std::vec
 		rv.push_back(points[i].residual.y);
 	}
 	return {median_of(ru), median_of(rv)};
+}
+
+/// The share of its box a cluster of grid cells covers (each member stands for member_area_px2).
+double box_fill(const std::vector<uint32_t> &members, const std::vector<MotionPoint> &points, const GroupParams &params)
+{
+	const cv::Rect2f e = extent_of(members, points);
+	const double side = std::sqrt(params.member_area_px2); // the box around the cells' centres
+	return static_cast<double>(members.size()) * params.member_area_px2 / ((e.width + side) * (e.height + side));
+}
+
+/// A cluster of grid cells cut into its connected regions: cells (at their positions in this frame, `step`
+/// apart on the grid) within gap_cells + 1 cells of each other in both directions are connected. Affinity
+/// Propagation with seed 002's preference makes few clusters, and two people walking alike far apart land
+/// in one; a mover is one region.
+std::vector<std::vector<uint32_t>> connected_parts(const std::vector<uint32_t> &members,
+						   const std::vector<MotionPoint> &points, double step, int gap_cells,
+						   double same_depth_ratio)
+{
+	const double reach = (gap_cells + 1.5) * step; // half a cell of slack: positions moved by the flow
+	std::vector<uint32_t> parent(members.size());
+	for (size_t i = 0; i < parent.size(); ++i)
+		parent[i] = static_cast<uint32_t>(i);
+	const auto root = [&parent](uint32_t i) {
+		while (parent[i] != i)
+			i = parent[i] = parent[parent[i]];
+		return i;
+	};
+	for (size_t a = 0; a < members.size(); ++a)
+		for (size_t b = a + 1; b < members.size(); ++b) {
+			const cv::Point2f d = points[members[a]].px - points[members[b]].px;
+			if (std::abs(d.x) <= reach && std::abs(d.y) <= reach)
+				parent[root(static_cast<uint32_t>(a))] = root(static_cast<uint32_t>(b));
+		}
+	// With depth, regions at the same depth (within same_depth_ratio of the nearer) stay one: a weakly
+	// textured mover shows motion only at its textured spots, all at its depth, where two walkers apart
+	// are rarely at the same distance. Without depth (monocular) the regions stay apart.
+	if (same_depth_ratio > 0) {
+		std::vector<std::vector<float>> depths(members.size());
+		for (size_t i = 0; i < members.size(); ++i)
+			if (const auto &xyz = points[members[i]].xyz; xyz && (*xyz)[2] > 0)
+				depths[root(static_cast<uint32_t>(i))].push_back((*xyz)[2]);
+		std::vector<std::pair<uint32_t, float>> region_depth;
+		for (size_t r = 0; r < members.size(); ++r)
+			if (depths[r].size() >= 3)
+				region_depth.emplace_back(static_cast<uint32_t>(r), median_of(depths[r]));
+		for (size_t a = 0; a < region_depth.size(); ++a)
+			for (size_t b = a + 1; b < region_depth.size(); ++b) {
+				const float za = region_depth[a].second, zb = region_depth[b].second;
+				if (std::abs(za - zb) <= same_depth_ratio * std::min(za, zb))
+					parent[root(region_depth[a].first)] = root(region_depth[b].first);
+			}
+	}
+	std::vector<std::vector<uint32_t>> parts;
+	std::vector<int> part_of_root(members.size(), -1);
+	for (size_t i = 0; i < members.size(); ++i) {
+		const uint32_t r = root(static_cast<uint32_t>(i));
+		if (part_of_root[r] < 0) {
+			part_of_root[r] = static_cast<int>(parts.size());
+			parts.emplace_back();
+		}
+		parts[static_cast<size_t>(part_of_root[r])].push_back(members[i]);
+	}
+	return parts;
 }
 
 /// Clusters whose boxes touch (within merge_gap_px) and that move alike (the join rule on their median
@@ -280,19 +342,20 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 			const cv::Point2f median = median_residual(members, points);
 			std::erase_if(members,
 				      [&](uint32_t i) { return !moves_with(points[i].residual, median, params); });
-			if (members.size() >= min_points)
+			if (params.member_area_px2 > 0 && params.split_gap_cells >= 0) {
+				for (auto &part : connected_parts(members, points, std::sqrt(params.member_area_px2),
+								  params.split_gap_cells, params.split_same_depth))
+					if (part.size() >= min_points)
+						kept.push_back(std::move(part));
+			} else if (members.size() >= min_points) {
 				kept.push_back(std::move(members));
+			}
 		}
 		if (params.merge_gap_px >= 0)
 			merge_touching(kept, points, params);
 		if (params.member_area_px2 > 0) {
 			std::erase_if(kept, [&](const std::vector<uint32_t> &members) {
-				const cv::Rect2f e = extent_of(members, points);
-				const double side =
-					std::sqrt(params.member_area_px2); // the box around the cells' centres
-				const double box = (e.width + side) * (e.height + side);
-				return static_cast<double>(members.size()) * params.member_area_px2 <
-				       params.min_box_fill * box;
+				return box_fill(members, points, params) < params.min_box_fill;
 			});
 		}
 		for (auto &members : kept)

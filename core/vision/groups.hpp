@@ -64,6 +64,12 @@ struct GroupParams {
 	/// cells of flow noise that clustered together are not a mover, which is a region.
 	double member_area_px2 = 0;
 	double min_box_fill = 0.1;
+	/// With member_area_px2 (grid cells): a cluster is cut into its connected regions, cells at most this
+	/// many empty cells apart being connected; negative: not cut.
+	int split_gap_cells = 2;
+	/// ... except that regions whose median depths agree within this share of the nearer stay one (stereo
+	/// and RGB-D); 0: depth is not looked at.
+	double split_same_depth = 0.1;
 };
 
 /// One temporally matched point as the grouping sees it.

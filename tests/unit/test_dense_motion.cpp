@@ -175,6 +175,86 @@ TEST(DenseFlow, MovingPatchIsTheOneGroup)
 	}
 }
 
+TEST(DenseFlow, MoversApartAreCutIntoRegionsUnlessAtOneDepth)
+{
+	// Two 48x96 textured patches 40 px (5 cells) apart, both moving 4 px per frame to the right (one motion,
+	// two regions), and a third far off moving up. With every sample linked and half the seed's preference
+	// (fewer, larger clusters, as crowded footage gives), Affinity Propagation puts the two in one cluster;
+	// cut into connected regions (split_gap_cells 2), each patch is one group with its box on it. With depth,
+	// the two stay one group when they are at the same distance (5 m both: a weakly textured mover's spots),
+	// and are cut when they are not (5 m and 8 m).
+	const cv::Size size(640, 480);
+	const cv::Mat background = texture(size, 3);
+	const cv::Mat patch_a = texture({48, 96}, 4), patch_b = texture({48, 96}, 5), patch_c = texture({48, 48}, 6);
+	auto frame = [&](int n) {
+		cv::Mat image = background.clone();
+		patch_a.copyTo(image(cv::Rect(100 + 4 * n, 120, patch_a.cols, patch_a.rows)));
+		patch_b.copyTo(image(cv::Rect(188 + 4 * n, 120, patch_b.cols, patch_b.rows)));
+		patch_c.copyTo(image(cv::Rect(560, 360 - 4 * n, patch_c.cols, patch_c.rows)));
+		return image;
+	};
+	DenseFlowParams params;
+	params.method = GroupFlow::PyrLk;
+	params.scale = 1.0;
+	struct Case {
+		int gap;
+		float depth_b; // patch B's depth; A's is 5 m; 0: no depth anywhere
+		size_t groups;
+	};
+	for (const Case c : {Case{2, 0, 3}, Case{-1, 0, 2}, Case{2, 5, 2}, Case{2, 8, 3}}) {
+		const int gap = c.gap;
+		GroupParams group_params;
+		group_params.members = GroupMembers::Flow;
+		group_params.box_margin_px = 0.5 * params.step_px;
+		group_params.member_area_px2 = params.step_px * params.step_px; // as the pipeline sets them
+		group_params.min_points = params.min_cells;
+		group_params.split_gap_cells = gap;
+		// Fewer, larger clusters (every sample linked, a lower preference), as crowded footage gives.
+		group_params.affinity.neighbours = 1000;
+		group_params.affinity.preference_scale = 2;
+		cv::Ptr<cv::DISOpticalFlow> dis;
+		AffinityPropagation workspace;
+		GroupMemory memory;
+		GroupMotionContext context;
+		context.dt_s = 0.1;
+		for (int n = 1; n <= 4; ++n) {
+			const CellFlow cells = dense_flow(dense_flow_image(frame(n - 1), params),
+							  dense_flow_image(frame(n), params), size, params, dis);
+			std::vector<MotionPoint> points = cell_motion(cells, params, {}, {}, {});
+			if (c.depth_b > 0)
+				for (MotionPoint &p : points)
+					p.xyz = cv::Vec3f(0, 0, p.px.x < 170.F ? 5.F : c.depth_b);
+			const std::vector<uint32_t> strong =
+				supported_cells(strong_motion(points, group_params), cells.cols, cells.rows,
+						params.min_strong_neighbours);
+			GroupOutput out = find_groups(points, n == 1 ? nullptr : &memory, context, group_params,
+						      workspace, &strong);
+			memory = out.memory;
+			if (n == 1)
+				continue;
+			const std::string what = "gap " + std::to_string(gap) + ", depth " + std::to_string(c.depth_b) +
+						 ", frame " + std::to_string(n);
+			// Not cut, or at one depth: the two patches that move alike come out as one group.
+			ASSERT_EQ(out.groups.size(), c.groups) << what;
+			if (c.groups == 2)
+				continue;
+			const float d = 4.F * static_cast<float>(n);
+			const std::vector<cv::Rect2f> truths = {{100.F + d, 120.F, 48.F, 96.F},
+								{188.F + d, 120.F, 48.F, 96.F},
+								{560.F, 360.F - d, 48.F, 48.F}};
+			std::vector<int> found(truths.size(), 0);
+			for (const TargetGroup &g : out.groups) {
+				const cv::Rect2f box(g.box_px[0], g.box_px[1], g.box_px[2] - g.box_px[0],
+						     g.box_px[3] - g.box_px[1]);
+				for (size_t t = 0; t < truths.size(); ++t)
+					if ((truths[t] & box).area() / (truths[t] | box).area() > 0.8F)
+						++found[t];
+			}
+			EXPECT_EQ(found, std::vector<int>(truths.size(), 1)) << what;
+		}
+	}
+}
+
 TEST(DenseFlow, CellDepthIsTheMedianAroundIt)
 {
 	// Cells of 8 px, radius 1: cell (2, 2) sees its own points (median 2 m) and its neighbour (3, 2)'s (4 m);
