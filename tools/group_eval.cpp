@@ -61,15 +61,24 @@ std::vector<TrueMover> visible_movers(const cv::Mat &mask, const nlohmann::json 
 	return movers;
 }
 
+namespace {
+
+/// A group's box as the mask's pixels it covers (rounded outwards), clipped to the mask.
+cv::Rect pixel_box(const TargetGroup &g, const cv::Mat &mask)
+{
+	return cv::Rect(cv::Point(static_cast<int>(std::floor(g.box_px[0])), static_cast<int>(std::floor(g.box_px[1]))),
+			cv::Point(static_cast<int>(std::ceil(g.box_px[2])) + 1,
+				  static_cast<int>(std::ceil(g.box_px[3])) + 1)) &
+	       cv::Rect(0, 0, mask.cols, mask.rows);
+}
+
+} // namespace
+
 std::vector<int> match_groups(const std::vector<TargetGroup> &groups, const cv::Mat &mask, double min_share)
 {
 	std::vector<int> matched;
 	for (const auto &g : groups) {
-		const cv::Rect box = cv::Rect(cv::Point(static_cast<int>(std::floor(g.box_px[0])),
-							static_cast<int>(std::floor(g.box_px[1]))),
-					      cv::Point(static_cast<int>(std::ceil(g.box_px[2])) + 1,
-							static_cast<int>(std::ceil(g.box_px[3])) + 1)) &
-				     cv::Rect(0, 0, mask.cols, mask.rows);
+		const cv::Rect box = pixel_box(g, mask);
 		std::map<int, int> count;
 		for (int y = box.y; y < box.y + box.height; ++y) {
 			const auto *row = mask.ptr<uint8_t>(y);
@@ -117,11 +126,7 @@ void GroupScore::add(const FrameResult &result, const cv::Mat &mask, const std::
 	std::vector<cv::Rect> boxes;
 	boxes.reserve(gs.size());
 	for (const auto &g : gs)
-		boxes.push_back(cv::Rect(cv::Point(static_cast<int>(std::floor(g.box_px[0])),
-						   static_cast<int>(std::floor(g.box_px[1]))),
-					 cv::Point(static_cast<int>(std::ceil(g.box_px[2])) + 1,
-						   static_cast<int>(std::ceil(g.box_px[3])) + 1)) &
-				cv::Rect(0, 0, mask.cols, mask.rows));
+		boxes.push_back(pixel_box(g, mask));
 	for (const auto &mover : movers) {
 		++mover_views;
 		// The mover's pixels inside the union of the boxes of groups on movers, and whether any box touches it.
