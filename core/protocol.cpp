@@ -168,16 +168,25 @@ std::string frame_message(const FrameResult &result)
 		groups.push_back(std::move(g));
 	}
 	message["groups"] = std::move(groups);
-	if (!result.people.empty()) {
-		json people = json::array();
-		for (const auto &person : result.people)
-			people.push_back({{"box_px",
-					   {round_to(person.box_px[0], 0.1), round_to(person.box_px[1], 0.1),
-					    round_to(person.box_px[2], 0.1), round_to(person.box_px[3], 0.1)}},
-					  {"score", round_to(person.score, 0.01)},
-					  {"age_frames", person.age_frames}});
-		message["people"] = std::move(people);
-	}
+	// The prior's regions: people (its dynamic category) and, with a model that knows them, objects.
+	const auto regions = [](const std::vector<PersonRegion> &list) {
+		json out = json::array();
+		for (const auto &r : list) {
+			json item = {{"box_px",
+				      {round_to(r.box_px[0], 0.1), round_to(r.box_px[1], 0.1),
+				       round_to(r.box_px[2], 0.1), round_to(r.box_px[3], 0.1)}},
+				     {"score", round_to(r.score, 0.01)},
+				     {"age_frames", r.age_frames}};
+			if (r.class_id >= 0)
+				item["class_id"] = r.class_id;
+			out.push_back(std::move(item));
+		}
+		return out;
+	};
+	if (!result.people.empty())
+		message["people"] = regions(result.people);
+	if (!result.objects.empty())
+		message["objects"] = regions(result.objects);
 	return message.dump();
 }
 
@@ -333,14 +342,18 @@ FrameResult parse_frame_message(const json &message)
 		group.class_name = g.value("class", std::string());
 		result.groups.push_back(group);
 	}
-	if (message.contains("people"))
-		for (const auto &p : message.at("people")) {
-			PersonRegion person;
-			person.box_px = array_field<float, 4>(p.at("box_px"));
-			person.score = field_or<float>(p, "score", 0.0F);
-			person.age_frames = field_or<int>(p, "age_frames", 0);
-			result.people.push_back(person);
+	for (const auto &[key, list] : {std::pair{"people", &result.people}, std::pair{"objects", &result.objects}}) {
+		if (!message.contains(key))
+			continue;
+		for (const auto &p : message.at(key)) {
+			PersonRegion region;
+			region.box_px = array_field<float, 4>(p.at("box_px"));
+			region.score = field_or<float>(p, "score", 0.0F);
+			region.age_frames = field_or<int>(p, "age_frames", 0);
+			region.class_id = field_or<int>(p, "class_id", -1);
+			list->push_back(region);
 		}
+	}
 	return result;
 }
 
@@ -512,7 +525,20 @@ std::string_view frame_json_schema()
         "properties": {
           "box_px": {"type": "array", "items": {"type": "number"}, "minItems": 4, "maxItems": 4},
           "score": {"type": "number"},
-          "age_frames": {"type": "integer"}
+          "age_frames": {"type": "integer"},
+          "class_id": {"type": "integer"}
+        }
+      }
+    },
+    "objects": {
+      "type": "array",
+      "items": {
+        "type": "object",
+        "properties": {
+          "box_px": {"type": "array", "items": {"type": "number"}, "minItems": 4, "maxItems": 4},
+          "score": {"type": "number"},
+          "age_frames": {"type": "integer"},
+          "class_id": {"type": "integer"}
         }
       }
     }

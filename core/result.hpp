@@ -35,6 +35,7 @@ struct PersonRegion {
 	std::array<float, 4> box_px{}; ///< u0, v0, u1, v1 in the left image
 	float score = 0;	       ///< the detector's margin when it was seen
 	int age_frames = 0;	       ///< frames since the detector saw it (0: this frame)
+	int class_id = -1;	       ///< the ONNX model's class; -1: HOG's person
 };
 
 /// The camera's own motion. Monocular sources have the image homography of the static scene only; stereo
@@ -114,6 +115,8 @@ struct FrameResult {
 	std::vector<TargetGroup> groups;
 	/// The person prior's regions for this frame; empty when it is off (or saw nobody).
 	std::vector<PersonRegion> people;
+	/// The prior's potentially dynamic category (an ONNX model that knows chairs): same fields as `people`.
+	std::vector<PersonRegion> objects;
 };
 
 } // namespace stereod

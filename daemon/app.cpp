@@ -3,9 +3,11 @@
 #include "daemon/live_recorder.hpp"
 
 #include <algorithm>
+#include <cerrno>
 #include <chrono>
 #include <csignal>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <functional>
@@ -26,6 +28,7 @@
 #include "core/geometry/rectify.hpp"
 #include "core/geometry/rig.hpp"
 #include "core/protocol.hpp"
+#include "core/vision/prior_model.hpp"
 #include "daemon/pipeline.hpp"
 #include "daemon/socket_server.hpp"
 #include "daemon/watchdog.hpp"
@@ -133,6 +136,25 @@ PipelineOptions pipeline_options(const DaemonConfig &config, const drivers::Sour
 		spdlog::info("calibration: {} (rectified: f {:.1f} px, baseline {:.4f} m)", path, rectification->rig.fx,
 			     rectification->rig.baseline_m);
 		options.rectification = std::move(rectification);
+	}
+	auto &prior = options.motion.prior;
+	if (prior.enabled && prior.detector == vision::PriorDetector::Onnx) {
+		// Loaded once, here: a missing or unfit model stops the start with the reason, not the first frame.
+		const std::string &path = prior.model_path;
+		if (path.empty())
+			throw ConfigError("prior.model: name the ONNX file (prior.detector = \"onnx\")");
+		std::ifstream file(path, std::ios::binary);
+		if (!file)
+			throw ConfigError("prior.model: " + path + ": cannot open: " + std::strerror(errno));
+		const std::vector<char> bytes{std::istreambuf_iterator<char>(file), std::istreambuf_iterator<char>()};
+		try {
+			prior.model = std::make_shared<const vision::PriorModel>(bytes, prior.model_spec);
+		} catch (const vision::PriorModelError &e) {
+			throw ConfigError("prior.model: " + path + ": " + e.what());
+		}
+		spdlog::info("prior: {} ({} classes out, {}x{} input, {})", path, prior.model->output_classes(),
+			     prior.model_spec.input_width, prior.model_spec.input_height,
+			     vision::format_class_map(prior.model_spec.classes));
 	}
 	return options;
 }

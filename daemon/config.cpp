@@ -15,6 +15,8 @@
 
 #include <toml.hpp>
 
+#include "core/vision/prior_model.hpp"
+
 namespace stereod::daemon {
 
 std::string describe_cut(const std::string &text, size_t limit)
@@ -743,6 +745,63 @@ const std::vector<Option> &options()
 		o.push_back(number(
 			"prior", "memory_chi2", "weighted: the motion memory's gate for points in a person box",
 			[](DaemonConfig &c) -> double & { return c.motion.prior.memory_chi2; }, 0.01, 1000));
+		o.push_back(enumeration(
+			"prior", "detector", "hog (OpenCV's people detector, no weights) | onnx (prior.model)",
+			[](DaemonConfig &c) -> vision::PriorDetector & { return c.motion.prior.detector; },
+			std::vector<std::pair<std::string, vision::PriorDetector>>{
+				{"hog", vision::PriorDetector::Hog}, {"onnx", vision::PriorDetector::Onnx}}));
+		o.push_back(text("prior", "model", "onnx: the model file (read at start; refused if it does not fit)",
+				 [](DaemonConfig &c) -> std::string & { return c.motion.prior.model_path; }));
+		o.push_back(enumeration(
+			"prior", "model_layout",
+			"onnx output: yolov8 (1x(4+C)xN) | yolov5 (1xNx(5+C)) | segmentation (1xCxhxw scores)",
+			[](DaemonConfig &c) -> vision::ModelLayout & { return c.motion.prior.model_spec.layout; },
+			std::vector<std::pair<std::string, vision::ModelLayout>>{
+				{"yolov8", vision::ModelLayout::Yolov8},
+				{"yolov5", vision::ModelLayout::Yolov5},
+				{"segmentation", vision::ModelLayout::Segmentation}}));
+		o.push_back(number(
+			"prior", "model_width", "onnx: the network's input width (the image is letterboxed into it)",
+			[](DaemonConfig &c) -> int & { return c.motion.prior.model_spec.input_width; }, 8, 8192));
+		o.push_back(number(
+			"prior", "model_height", "onnx: the network's input height",
+			[](DaemonConfig &c) -> int & { return c.motion.prior.model_spec.input_height; }, 8, 8192));
+		o.push_back(number(
+			"prior", "model_scale", "onnx: pixel values are multiplied by this (1/255: 0..1)",
+			[](DaemonConfig &c) -> double & { return c.motion.prior.model_spec.input_scale; }, 1e-6, 1e3));
+		o.push_back(boolean("prior", "model_rgb",
+				    "onnx: the network wants RGB (false: BGR, as OpenCV's images)",
+				    [](DaemonConfig &c) -> bool & { return c.motion.prior.model_spec.swap_rb; }));
+		{
+			Option classes{"prior", "model_classes",
+				       "onnx: class:category pairs, category dynamic | potentially_dynamic (0 = COCO's "
+				       "person)",
+				       nullptr, nullptr};
+			classes.set = [](const Value &v, DaemonConfig &c) {
+				if (!v.is_string())
+					throw std::invalid_argument(
+						"must be a string, e.g. \"0:dynamic,56:potentially_dynamic\"");
+				c.motion.prior.model_spec.classes = vision::parse_class_map(std::string(v.as_string()));
+			};
+			classes.show = [](const DaemonConfig &c) {
+				return "\"" + vision::format_class_map(c.motion.prior.model_spec.classes) + "\"";
+			};
+			o.push_back(std::move(classes));
+		}
+		o.push_back(number(
+			"prior", "model_min_confidence", "onnx detectors: the score a box needs (0..1)",
+			[](DaemonConfig &c) -> double & { return c.motion.prior.model_spec.min_confidence; }, 0, 1));
+		o.push_back(number(
+			"prior", "model_nms_iou", "onnx detectors: boxes of one class overlapping more are one (IoU)",
+			[](DaemonConfig &c) -> double & { return c.motion.prior.model_spec.nms_iou; }, 0, 1));
+		o.push_back(number(
+			"prior", "model_min_region_px", "onnx segmentation: smaller regions (image pixels) are dropped",
+			[](DaemonConfig &c) -> int & { return c.motion.prior.model_spec.min_region_px; }, 1,
+			100000000));
+		o.push_back(number(
+			"prior", "object_vote",
+			"potentially dynamic objects: all their points are dynamic when this share of them is",
+			[](DaemonConfig &c) -> double & { return c.motion.prior.object_vote; }, 0, 1));
 
 		// [keyframes]: seed 001's keyframe selection, eqs. 6-7 (core/vision/keyframes.hpp)
 		o.push_back(boolean("keyframes", "enabled", "mark keyframes (stereo/RGB-D: needs the metric pose)",

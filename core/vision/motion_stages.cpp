@@ -8,6 +8,7 @@
 #include <opencv2/video/tracking.hpp>
 
 #include "core/stage_timer.hpp"
+#include "core/vision/prior_model.hpp"
 
 namespace stereod::vision {
 
@@ -105,9 +106,13 @@ PointLabel combine(LabelMethod method, PointLabel seed, const GeometricTest &tes
 void publish_people(std::span<const PriorRegion> regions, FrameResult &result)
 {
 	result.people.clear();
+	result.objects.clear();
 	for (const PriorRegion &r : regions)
-		result.people.push_back(
-			{{r.box.x, r.box.y, r.box.x + r.box.width, r.box.y + r.box.height}, r.score, r.age_frames});
+		(r.category == PriorCategory::Dynamic ? result.people : result.objects)
+			.push_back({{r.box.x, r.box.y, r.box.x + r.box.width, r.box.y + r.box.height},
+				    r.score,
+				    r.age_frames,
+				    r.class_id});
 }
 
 /// A frame's static points with depth, for the keyframe selection.
@@ -195,7 +200,12 @@ FrameFeatures extract_stage(const StereoFrame &frame, const MotionParams &params
 	if (params.prior.enabled &&
 	    frame.sequence % static_cast<uint64_t>(std::max(params.prior.every_n_frames, 1)) == 0) {
 		StageTimer timer(timing, "prior");
-		features.people = detect_people(grey, params.prior);
+		if (params.prior.detector == PriorDetector::Hog)
+			features.people = detect_people(grey, params.prior);
+		else if (params.prior.model)
+			features.people = params.prior.model->detect(frame.left, params.prior.margin);
+		else // the daemon loads the model at start; a caller that did not gets no regions, not HOG's
+			features.people = std::vector<PriorRegion>{};
 	}
 	if (!params.rig)
 		return features;
@@ -422,6 +432,13 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 	promote_remembered_movers(classification.labels, matches, tracks, params.classifier, params.temporal,
 				  weighted ? std::span<const uint8_t>(in_person) : std::span<const uint8_t>(),
 				  params.prior.memory_chi2);
+	if (params.prior.enabled && !people.empty()) {
+		// Seed 001's potentially dynamic objects: judged point by point above, then as a whole.
+		std::vector<cv::Point2f> at(n);
+		for (size_t i = 0; i < n; ++i)
+			at[i] = pairs[i].cur;
+		vote_potentially_dynamic(at, people, classification.labels, params.prior.object_vote);
+	}
 	// The camera in the world: chained on from the previous frame, or carried over when no pose was found.
 	const geometry::Pose world_prev = prev_tracks != nullptr && prev_tracks->world_from_camera
 						  ? *prev_tracks->world_from_camera

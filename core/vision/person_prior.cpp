@@ -1,6 +1,7 @@
 #include "core/vision/person_prior.hpp"
 
 #include <algorithm>
+#include <cmath>
 
 #include <opencv2/imgproc.hpp>
 #include <opencv2/objdetect.hpp>
@@ -50,7 +51,10 @@ std::vector<PriorRegion> detect_people(const cv::Mat &grey, const PersonPriorPar
 		box = cv::Rect2f(box.x - mx, box.y - my, box.width + 2 * mx, box.height + 2 * my) & frame;
 		if (box.area() <= 0)
 			continue;
-		regions.push_back({box, static_cast<float>(score), PriorCategory::Dynamic, 0});
+		PriorRegion region;
+		region.box = box;
+		region.score = static_cast<float>(score);
+		regions.push_back(std::move(region));
 	}
 	return regions;
 }
@@ -66,7 +70,7 @@ std::vector<PriorRegion> carry_regions(std::span<const PriorRegion> regions, std
 		dx.clear();
 		dy.clear();
 		for (size_t i = 0; i < from.size() && i < to.size(); ++i) {
-			if (!region.box.contains(from[i]))
+			if (!region_contains(region, from[i]))
 				continue;
 			dx.push_back(to[i].x - from[i].x);
 			dy.push_back(to[i].y - from[i].y);
@@ -82,6 +86,17 @@ std::vector<PriorRegion> carry_regions(std::span<const PriorRegion> regions, std
 	return carried;
 }
 
+bool region_contains(const PriorRegion &region, cv::Point2f point)
+{
+	if (!region.box.contains(point))
+		return false;
+	if (region.mask.empty())
+		return true;
+	const int x = static_cast<int>(std::floor(point.x - region.box.x));
+	const int y = static_cast<int>(std::floor(point.y - region.box.y));
+	return x >= 0 && y >= 0 && x < region.mask.cols && y < region.mask.rows && region.mask.at<uint8_t>(y, x) != 0;
+}
+
 std::vector<uint8_t> in_dynamic_category(std::span<const cv::Point2f> points, std::span<const PriorRegion> regions)
 {
 	std::vector<uint8_t> inside(points.size(), 0);
@@ -89,10 +104,37 @@ std::vector<uint8_t> in_dynamic_category(std::span<const cv::Point2f> points, st
 		if (region.category != PriorCategory::Dynamic)
 			continue;
 		for (size_t i = 0; i < points.size(); ++i)
-			if (region.box.contains(points[i]))
+			if (region_contains(region, points[i]))
 				inside[i] = 1;
 	}
 	return inside;
+}
+
+int vote_potentially_dynamic(std::span<const cv::Point2f> points, std::span<const PriorRegion> regions,
+			     std::span<PointLabel> labels, double min_share)
+{
+	int changed = 0;
+	const size_t n = std::min(points.size(), labels.size());
+	for (const PriorRegion &region : regions) {
+		if (region.category != PriorCategory::PotentiallyDynamic)
+			continue;
+		int decided = 0;
+		int dynamic = 0;
+		for (size_t i = 0; i < n; ++i) {
+			if (labels[i] == PointLabel::Uncertain || !region_contains(region, points[i]))
+				continue;
+			++decided;
+			dynamic += labels[i] == PointLabel::Dynamic ? 1 : 0;
+		}
+		if (dynamic < 2 || static_cast<double>(dynamic) < min_share * static_cast<double>(decided))
+			continue;
+		for (size_t i = 0; i < n; ++i)
+			if (labels[i] != PointLabel::Dynamic && region_contains(region, points[i])) {
+				labels[i] = PointLabel::Dynamic;
+				++changed;
+			}
+	}
+	return changed;
 }
 
 } // namespace stereod::vision

@@ -25,6 +25,23 @@ echo "not a recording" >"$WORK/fake.srec"
 expect_error "not a recording" "not a stereod recording" \
 	"$STEREOD" process --input "$WORK/fake.srec" --format recording --output "$WORK/x.ndjson"
 
+# The prior's ONNX model: missing, not a model, or not fitting the configuration, refused at start with the
+# reason; a class map that does not parse names file, line and key.
+MODELS="$(cd "$(dirname "$0")/../fixtures/onnx" && pwd)"
+ONNX=(--set prior.enabled=true --set prior.detector=onnx --set prior.model_width=64 --set prior.model_height=64)
+expect_error "missing model" "prior.model: $WORK/absent.onnx: cannot open: No such file or directory" \
+	"$STEREOD" process --input sim --format sim --set sim.frames=2 "${ONNX[@]}" --set prior.model="$WORK/absent.onnx" \
+	--output "$WORK/x.ndjson"
+expect_error "not a model" "prior.model: $WORK/fake.srec: not a model OpenCV's dnn can read" \
+	"$STEREOD" process --input sim --format sim --set sim.frames=2 "${ONNX[@]}" --set prior.model="$WORK/fake.srec" \
+	--output "$WORK/x.ndjson"
+expect_error "unfit model" "class 7 is mapped, but the model has 2 classes (0 to 1)" \
+	"$STEREOD" process --input sim --format sim --set sim.frames=2 "${ONNX[@]}" \
+	--set prior.model="$MODELS/yolov8_fixed.onnx" --set prior.model_classes=7:dynamic --output "$WORK/x.ndjson"
+printf '[prior]\nenabled = true\nmodel_classes = "0:dynamic,56:chair"\n' >"$WORK/classes.toml"
+expect_error "bad class map" "classes.toml:3: prior.model_classes: '56:chair': the category must be dynamic or potentially_dynamic" \
+	"$STEREOD" --config "$WORK/classes.toml"
+
 # A truncated recording is not an error: its complete frames are processed and the cut is reported once.
 "$STEREOCTL" record "${SMALL_SIM[@]}" --frames 5 --output "$WORK/five.srec" 2>/dev/null
 truncate -s $(($(stat -c %s "$WORK/five.srec") - 10)) "$WORK/five.srec"

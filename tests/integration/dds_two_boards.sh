@@ -84,8 +84,10 @@ for board in front rear; do
 		   fps: ([$m[] | select(.topic == "status" and .fps_publish > 0) | .fps_publish] | if length > 0 then add / length else 0 end)}' \
 		"$WORK/dds.jsonl" >"$WORK/$board.rates.json"
 	echo "$board: $(cat "$WORK/$board.rates.json") (messages in 6 s; rate per second of capture time)"
-	jq -e '.odom >= 20 and (.points - .odom | fabs) <= 2 and (.groups - .odom | fabs) <= 2 and .status >= 4
-		and .rate >= 0.8 * .fps' "$WORK/$board.rates.json" >/dev/null ||
+	# The count too is judged against the daemon's own rate (6 s of it, less a second for discovery): under
+	# ASan on a loaded 2-core machine two daemons have published at ~3 fps, 19 frames in the 6 s.
+	jq -e '.odom >= 10 and .odom >= 0.8 * .fps * 5 and (.points - .odom | fabs) <= 2 and (.groups - .odom | fabs) <= 2
+		and .status >= 4 and .rate >= 0.8 * .fps' "$WORK/$board.rates.json" >/dev/null ||
 		fail "$board: $(cat "$WORK/$board.rates.json"): want the frame topics at >= 80 % of the published fps, 1 status/s"
 	jq -e -s --arg b "$board" '[.[] | select(.board == $b and .topic == "status")] | all(.name == $b and .source == "sim")' \
 		"$WORK/dds.jsonl" >/dev/null || fail "$board: status names another board"
@@ -117,7 +119,7 @@ jq -n --slurpfile d "$WORK/dds.jsonl" --slurpfile f "$WORK/front.ndjson" '
 		groups_seen: [$groups[] | .detections | length] | add
 	}' >"$WORK/compare.json"
 cat "$WORK/compare.json" | jq -c .
-jq -e '.matched >= 20 and .matched >= 0.98 * .in_window and .odom_bad == 0 and .odom_unknown_bad == 0 and .points_bad == 0 and .groups_bad == 0
+jq -e '.matched >= 10 and .matched >= 0.98 * .in_window and .odom_bad == 0 and .odom_unknown_bad == 0 and .points_bad == 0 and .groups_bad == 0
 	and .dynamic_points > 0 and .groups_seen > 0' "$WORK/compare.json" >/dev/null ||
 	fail "DDS messages differ from the NDJSON stream for the same frames: $(jq -c . "$WORK/compare.json")"
 echo "ok: front's odom, points and groups on DDS equal its NDJSON stream for $(jq .matched "$WORK/compare.json") frames (of $(jq .in_window "$WORK/compare.json") published in that time)"

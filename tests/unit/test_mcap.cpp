@@ -393,6 +393,8 @@ TEST(McapRecording, FrameSchemaDescribesEveryFieldOfAFullMessage)
 	r.groups.back().heading_rad = 0.5;
 	r.groups.back().class_name = "person";
 	r.people.push_back({});
+	r.people.back().class_id = 0;
+	r.objects.push_back(r.people.back());
 	r.timing.push_back({"extract", 1.0});
 	const auto message = nlohmann::json::parse(protocol::frame_message(r));
 	const auto &props = schema.at("properties");

@@ -13,7 +13,12 @@ namespace {
 
 PriorRegion region(float x, float y, float w, float h, PriorCategory category = PriorCategory::Dynamic, int age = 0)
 {
-	return {cv::Rect2f(x, y, w, h), 1.5F, category, age};
+	PriorRegion r;
+	r.box = cv::Rect2f(x, y, w, h);
+	r.score = 1.5F;
+	r.category = category;
+	r.age_frames = age;
+	return r;
 }
 
 /// Blurred noise: corners everywhere, no repeated pattern.

@@ -158,8 +158,28 @@ TEST(Protocol, PersonPriorFieldsRoundTripAndAreAbsentWhenOff)
 	EXPECT_FLOAT_EQ(back.people[0].box_px[1], 20.3F); // rounded to 0.1 px
 	EXPECT_FLOAT_EQ(back.people[0].score, 2.35F);
 	EXPECT_EQ(back.people[0].age_frames, 3);
+	EXPECT_EQ(back.people[0].class_id, -1); // HOG's: no class number written
+	EXPECT_FALSE(json.at("people")[0].contains("class_id"));
+	EXPECT_FALSE(json.contains("objects"));
 	EXPECT_TRUE(back.points[0].in_person);
 	EXPECT_EQ(back.groups[0].class_name, "person");
+}
+
+TEST(Protocol, AModelsClassesAndPotentiallyDynamicObjectsRoundTrip)
+{
+	FrameResult r;
+	r.people.push_back({{1, 2, 3, 4}, 0.91F, 0, 0});
+	r.objects.push_back({{50, 60, 90, 120}, 0.7F, 2, 56});
+	const auto json = nlohmann::json::parse(protocol::frame_message(r));
+	EXPECT_EQ(json.at("people")[0].at("class_id"), 0);
+	EXPECT_EQ(json.at("objects")[0].at("class_id"), 56);
+	const FrameResult back = protocol::parse_frame_message(json);
+	ASSERT_EQ(back.people.size(), 1U);
+	ASSERT_EQ(back.objects.size(), 1U);
+	EXPECT_EQ(back.people[0].class_id, 0);
+	EXPECT_EQ(back.objects[0].class_id, 56);
+	EXPECT_EQ(back.objects[0].age_frames, 2);
+	EXPECT_FLOAT_EQ(back.objects[0].box_px[3], 120);
 }
 
 // Found by fuzz_frame_message: nlohmann converts numbers with a static_cast, so "width": 1e24 as an int (or
