@@ -677,6 +677,10 @@ const std::vector<Option> &options()
 		o.push_back(number(
 			"groups", "neighbours", "Affinity Propagation: messages to this many nearest samples",
 			[](DaemonConfig &c) -> int & { return c.motion.groups.affinity.neighbours; }, 1, 10000));
+		o.push_back(boolean(
+			"groups", "symmetric_neighbours",
+			"Affinity Propagation: a pair is linked both ways when either is among the other's nearest",
+			[](DaemonConfig &c) -> bool & { return c.motion.groups.affinity.symmetric; }));
 		o.push_back(number(
 			"groups", "damping", "Affinity Propagation: damping lambda",
 			[](DaemonConfig &c) -> double & { return c.motion.groups.affinity.damping; }, 0.5, 0.99));

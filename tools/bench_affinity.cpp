@@ -62,7 +62,12 @@ int main(int argc, char **argv)
 	app.add_option("--neighbours", params.neighbours);
 	app.add_option("--damping", params.damping);
 	app.add_option("--max-iterations", params.max_iterations);
+	app.add_flag("--symmetric", params.symmetric, "link k-nearest pairs both ways");
+	double preference = 0;
+	app.add_option("--preference", preference, "a fixed preference instead of the seed's minimum similarity");
 	CLI11_PARSE(app, argc, argv);
+	if (app.count("--preference") > 0)
+		params.preference = preference;
 	std::printf(
 		"| points | sparse k=%d ms (best of %d) | iterations | clusters | dense ms | iterations | clusters |\n",
 		params.neighbours, repeat);

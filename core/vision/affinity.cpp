@@ -20,6 +20,44 @@ float squared_distance(const float *a, const float *b, int dims)
 
 } // namespace
 
+float AffinityPropagation::farthest_pair(const float *data, size_t n, int dims)
+{
+	// Exactly, but not over all n^2 / 2 pairs: with r the distance of each sample to the samples' mean, no
+	// pair is farther apart than r_i + r_j (the triangle inequality). Samples in order of falling r, the
+	// search of a row stops once that bound cannot beat the best so far, and the whole search once twice
+	// the row's r cannot. Clustered samples end after a few rows.
+	centre_.assign(static_cast<size_t>(dims), 0.F);
+	for (size_t i = 0; i < n; ++i)
+		for (int d = 0; d < dims; ++d)
+			centre_[static_cast<size_t>(d)] += data[i * static_cast<size_t>(dims) + static_cast<size_t>(d)];
+	for (float &c : centre_)
+		c /= static_cast<float>(n);
+	radius_.resize(n);
+	order_.resize(n);
+	for (size_t i = 0; i < n; ++i)
+		radius_[i] = std::sqrt(squared_distance(data + i * static_cast<size_t>(dims), centre_.data(), dims));
+	std::iota(order_.begin(), order_.end(), 0u);
+	std::sort(order_.begin(), order_.end(), [this](uint32_t a, uint32_t b) { return radius_[a] > radius_[b]; });
+	// The bound in squares, a little loose so that rounding never prunes the true farthest pair.
+	const auto cannot_beat = [](float bound, float best) { return bound * bound * (1 - 1e-4F) < best; };
+	float best = 0;
+	for (size_t a = 0; a < n; ++a) {
+		const uint32_t i = order_[a];
+		if (cannot_beat(2 * radius_[i], best))
+			break;
+		const float *xi = data + static_cast<size_t>(i) * static_cast<size_t>(dims);
+		for (size_t b = a + 1; b < n; ++b) {
+			const uint32_t j = order_[b];
+			if (cannot_beat(radius_[i] + radius_[j], best))
+				break;
+			best = std::max(
+				best,
+				squared_distance(xi, data + static_cast<size_t>(j) * static_cast<size_t>(dims), dims));
+		}
+	}
+	return best;
+}
+
 const AffinityResult &AffinityPropagation::cluster(const cv::Mat &samples, const AffinityParams &params)
 {
 	CV_Assert(samples.empty() || (samples.type() == CV_32F && samples.isContinuous()));
@@ -38,41 +76,137 @@ const AffinityResult &AffinityPropagation::cluster(const cv::Mat &samples, const
 	const auto k = static_cast<size_t>(std::clamp<int>(params.neighbours, 1, static_cast<int>(n) - 1));
 	const auto *data = samples.ptr<float>();
 
-	// Similarities to the k nearest of each sample; the minimum over all pairs for the seed's preference.
+	// The seed's preference: the minimum similarity over all pairs, i.e. minus the largest squared distance.
+	const float min_similarity = params.preference ? 0.F : -farthest_pair(data, n, dims);
+
+	// The k nearest of each sample, exactly, by a sweep along the dimension with the widest spread: samples
+	// sorted on it, each looks outwards from its own place and stops on a side once the distance along that
+	// dimension alone exceeds its k-th best so far. Clustered samples (what a frame's movers give) look at a
+	// few times k others instead of all n. Ties go to the lower index, so the result is the same whatever
+	// the order of the scan.
+	int axis = 0;
+	{
+		float widest = -1;
+		for (int d = 0; d < dims; ++d) {
+			float lo = std::numeric_limits<float>::infinity(), hi = -lo;
+			for (size_t i = 0; i < n; ++i) {
+				lo = std::min(lo, data[i * static_cast<size_t>(dims) + static_cast<size_t>(d)]);
+				hi = std::max(hi, data[i * static_cast<size_t>(dims) + static_cast<size_t>(d)]);
+			}
+			if (hi - lo > widest) {
+				widest = hi - lo;
+				axis = d;
+			}
+		}
+	}
+	const auto coordinate = [&](uint32_t i) {
+		return data[i * static_cast<size_t>(dims) + static_cast<size_t>(axis)];
+	};
+	order_.resize(n);
+	std::iota(order_.begin(), order_.end(), 0u);
+	std::sort(order_.begin(), order_.end(), [&](uint32_t a, uint32_t b) {
+		return coordinate(a) < coordinate(b) || (coordinate(a) == coordinate(b) && a < b);
+	});
 	row_start_.assign(n + 1, 0);
 	column_.resize(n * (k + 1));
 	similarity_.resize(n * (k + 1));
-	distances_.resize(n);
-	order_.resize(n);
-	float min_similarity = 0;
-	for (size_t i = 0; i < n; ++i) {
+	nearest_.reserve(k + 1);
+	// A max-heap on (distance, index): its top is the worst of the k kept.
+	const auto worse = [](const std::pair<float, uint32_t> &a, const std::pair<float, uint32_t> &b) {
+		return a < b;
+	};
+	for (size_t p = 0; p < n; ++p) {
+		const uint32_t i = order_[p];
 		const float *xi = data + i * static_cast<size_t>(dims);
-		float farthest = 0;
-		for (size_t j = 0; j < n; ++j) {
-			const float d = squared_distance(xi, data + j * static_cast<size_t>(dims), dims);
-			farthest = std::max(farthest, d);
-			distances_[j] = d;
+		const float ci = coordinate(i);
+		nearest_.clear();
+		const auto consider = [&](uint32_t j) {
+			const std::pair<float, uint32_t> candidate{
+				squared_distance(xi, data + j * static_cast<size_t>(dims), dims), j};
+			if (nearest_.size() < k) {
+				nearest_.push_back(candidate);
+				std::push_heap(nearest_.begin(), nearest_.end(), worse);
+			} else if (candidate < nearest_.front()) {
+				std::pop_heap(nearest_.begin(), nearest_.end(), worse);
+				nearest_.back() = candidate;
+				std::push_heap(nearest_.begin(), nearest_.end(), worse);
+			}
+		};
+		// Out to both sides; a side stops when its next sample is farther along the axis alone than the
+		// k-th best (a tie on distance may still win on index, hence <=).
+		size_t left = p, right = p + 1;
+		bool left_open = left > 0, right_open = right < n;
+		while (left_open || right_open) {
+			if (left_open) {
+				const uint32_t j = order_[left - 1];
+				const float gap = ci - coordinate(j);
+				if (nearest_.size() == k && gap * gap > nearest_.front().first) {
+					left_open = false;
+				} else {
+					consider(j);
+					--left;
+					left_open = left > 0;
+				}
+			}
+			if (right_open) {
+				const uint32_t j = order_[right];
+				const float gap = coordinate(j) - ci;
+				if (nearest_.size() == k && gap * gap > nearest_.front().first) {
+					right_open = false;
+				} else {
+					consider(j);
+					++right;
+					right_open = right < n;
+				}
+			}
 		}
-		distances_[i] = std::numeric_limits<float>::infinity(); // never its own neighbour
-		min_similarity = std::min(min_similarity, -farthest);
-		std::iota(order_.begin(), order_.end(), 0u);
-		std::nth_element(order_.begin(), order_.begin() + static_cast<std::ptrdiff_t>(k - 1), order_.end(),
-				 [this](uint32_t a, uint32_t b) { return distances_[a] < distances_[b]; });
-		const size_t base = i * (k + 1);
+		const size_t base = static_cast<size_t>(i) * (k + 1);
+		std::sort_heap(nearest_.begin(), nearest_.end(), worse);
 		for (size_t e = 0; e < k; ++e) {
-			column_[base + e] = order_[e];
-			similarity_[base + e] = -distances_[order_[e]];
+			column_[base + e] = nearest_[e].second;
+			similarity_[base + e] = -nearest_[e].first;
 		}
-		column_[base + k] = static_cast<uint32_t>(i);
-		row_start_[i + 1] = static_cast<uint32_t>(base + k + 1);
+		column_[base + k] = i;
 	}
+	for (size_t i = 0; i < n; ++i)
+		row_start_[i + 1] = static_cast<uint32_t>((i + 1) * (k + 1));
 	const double preference = params.preference ? *params.preference : params.preference_scale * min_similarity;
 	result.preference = preference;
-	const size_t edges = n * (k + 1);
+	size_t edges = n * (k + 1);
 	self_edge_.resize(n);
 	for (size_t i = 0; i < n; ++i) {
 		similarity_[i * (k + 1) + k] = static_cast<float>(preference);
 		self_edge_[i] = static_cast<uint32_t>(i * (k + 1) + k);
+	}
+	if (params.symmetric) {
+		// j among i's nearest gives the pair both ways: messages flow between them in both directions.
+		links_.clear();
+		for (size_t i = 0; i < n; ++i)
+			for (size_t e = i * (k + 1); e < (i + 1) * (k + 1); ++e) {
+				links_.push_back({static_cast<uint32_t>(i), column_[e], similarity_[e]});
+				if (column_[e] != i)
+					links_.push_back({column_[e], static_cast<uint32_t>(i), similarity_[e]});
+			}
+		std::sort(links_.begin(), links_.end(), [](const Link &a, const Link &b) {
+			return a.row < b.row || (a.row == b.row && a.column < b.column);
+		});
+		links_.erase(std::unique(links_.begin(), links_.end(),
+					 [](const Link &a, const Link &b) {
+						 return a.row == b.row && a.column == b.column;
+					 }),
+			     links_.end());
+		edges = links_.size();
+		column_.resize(edges);
+		similarity_.resize(edges);
+		std::fill(row_start_.begin(), row_start_.end(), 0u);
+		for (size_t e = 0; e < edges; ++e) {
+			column_[e] = links_[e].column;
+			similarity_[e] = links_[e].similarity;
+			++row_start_[links_[e].row + 1];
+			if (links_[e].row == links_[e].column)
+				self_edge_[links_[e].row] = static_cast<uint32_t>(e);
+		}
+		std::partial_sum(row_start_.begin(), row_start_.end(), row_start_.begin());
 	}
 	// Column index: the edges pointing at each sample, for the availability update.
 	column_start_.assign(n + 1, 0);
@@ -169,8 +303,8 @@ const AffinityResult &AffinityPropagation::cluster(const cv::Mat &samples, const
 		}
 		float best = -std::numeric_limits<float>::infinity();
 		int chosen = -1;
-		for (size_t e = row_start_[i]; e + 1 < row_start_[i + 1]; ++e)
-			if (exemplar_flag_[column_[e]] && similarity_[e] > best) {
+		for (size_t e = row_start_[i]; e < row_start_[i + 1]; ++e)
+			if (e != self_edge_[i] && exemplar_flag_[column_[e]] && similarity_[e] > best) {
 				best = similarity_[e];
 				chosen = static_cast<int>(column_[e]);
 			}

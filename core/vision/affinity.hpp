@@ -10,6 +10,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <optional>
+#include <utility>
 #include <vector>
 
 #include <opencv2/core.hpp>
@@ -23,6 +24,7 @@ struct AffinityParams {
 	int convergence_iterations = 15;  ///< stop when the exemplars stayed the same this many iterations
 	double preference_scale = 1.0;	  ///< x the minimum similarity (seed 002)
 	std::optional<double> preference; ///< overrides the seed's choice when set
+	bool symmetric = false; ///< j among i's k nearest links them both ways (a symmetric sparse similarity)
 };
 
 struct AffinityResult {
@@ -42,13 +44,23 @@ public:
 	/// The result lives in this object until the next call.
 	const AffinityResult &cluster(const cv::Mat &samples, const AffinityParams &params);
 
+	/// The largest squared distance between two rows of `data` (n x dims), exactly.
+	float farthest_pair(const float *data, size_t n, int dims);
+
 private:
 	AffinityResult result_;
+	std::vector<float> centre_, radius_;
 	// Edges in row-major order: row i's edges are [row_start_[i], row_start_[i + 1]); its last is (i, i).
 	std::vector<uint32_t> row_start_, column_;
 	std::vector<float> similarity_, responsibility_, availability_;
 	std::vector<uint32_t> column_start_, column_edges_, self_edge_;
-	std::vector<float> distances_, positive_sum_;
+	std::vector<float> positive_sum_;
+	std::vector<std::pair<float, uint32_t>> nearest_; ///< one sample's k nearest so far (a max-heap)
+	struct Link {
+		uint32_t row, column;
+		float similarity;
+	};
+	std::vector<Link> links_; ///< symmetric: every pair both ways
 	std::vector<uint32_t> order_;
 	std::vector<uint8_t> exemplar_flag_;
 	std::vector<int> stable_exemplars_;

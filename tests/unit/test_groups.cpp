@@ -85,6 +85,55 @@ TEST(AffinityPropagation, PreferenceSetsHowManyClusters)
 	EXPECT_GT(ap.cluster(samples, many).clusters, 10);
 }
 
+// The seed's preference needs the farthest pair; the pruned search must find exactly what all pairs give,
+// on clustered samples (where it prunes) and on uniform ones (where it cannot much).
+TEST(AffinityPropagation, FarthestPairIsExact)
+{
+	std::mt19937 rng(5);
+	std::uniform_real_distribution<float> uniform(-30.f, 30.f);
+	for (const bool clustered : {true, false})
+		for (const int n : {2, 3, 50, 400}) {
+			cv::Mat samples(n, 6, CV_32F);
+			for (int i = 0; i < n; ++i)
+				for (int d = 0; d < 6; ++d)
+					samples.at<float>(i, d) =
+						clustered ? static_cast<float>(10 * (i % 4)) + uniform(rng) / 30
+							  : uniform(rng);
+			float brute = 0;
+			for (int i = 0; i < n; ++i)
+				for (int j = i + 1; j < n; ++j)
+					brute = std::max(brute,
+							 static_cast<float>(cv::norm(samples.row(i), samples.row(j),
+										     cv::NORM_L2SQR)));
+			AffinityPropagation ap;
+			EXPECT_NEAR(ap.farthest_pair(samples.ptr<float>(), static_cast<size_t>(n), 6), brute,
+				    brute * 1e-5)
+				<< (clustered ? "clustered" : "uniform") << " n=" << n;
+		}
+}
+
+// Linking k-nearest pairs both ways gives the same clusters on separated blobs, and with every sample
+// linked it is the dense algorithm as well.
+TEST(AffinityPropagation, SymmetricNeighboursKeepTheAnswer)
+{
+	const cv::Mat samples = blobs({{0, 0}, {20, 0}, {0, 20}, {30, 30}}, 40);
+	AffinityParams params;
+	params.symmetric = true;
+	AffinityPropagation ap;
+	const AffinityResult &result = ap.cluster(samples, params);
+	EXPECT_TRUE(result.converged);
+	EXPECT_EQ(result.clusters, 4);
+	for (size_t b = 0; b < 4; ++b)
+		for (size_t i = 0; i < 40; ++i)
+			EXPECT_EQ(result.exemplar[b * 40 + i], result.exemplar[b * 40]) << "blob " << b;
+	const cv::Mat few = blobs({{0, 0}, {12, 3}, {5, 14}}, 20, 3);
+	params.neighbours = few.rows - 1;
+	const AffinityResult all = ap.cluster(few, params);
+	const AffinityResult dense = affinity_propagation_dense(few, params);
+	EXPECT_EQ(all.clusters, dense.clusters);
+	EXPECT_EQ(all.exemplar, dense.exemplar);
+}
+
 TEST(AffinityPropagation, TrivialSizes)
 {
 	AffinityPropagation ap;
