@@ -561,6 +561,11 @@ const std::vector<Option> &options()
 		o.push_back(number(
 			"ego", "anchor_min_frames", "anchored depth test after this many frames of a track; 0 = off",
 			[](DaemonConfig &c) -> int & { return c.motion.ego.anchor_min_frames; }, 0, 100000));
+		o.push_back(number(
+			"ego", "anchor_max_speed_mps",
+			"anchored test: a track whose depth leaps faster than this between frames is anchored again; 0 "
+			"= off",
+			[](DaemonConfig &c) -> double & { return c.motion.ego.anchor_max_speed_mps; }, 0, 1000));
 		o.push_back(boolean("ego", "depth_check", "test the depth measured at frame n (seed 001 eq. 4)",
 				    [](DaemonConfig &c) -> bool & { return c.motion.ego.depth_check; }));
 		o.push_back(boolean("ego", "along_line",

@@ -63,13 +63,17 @@ struct EgoParams {
 	/// this keeps seed 000's label: there the translation is poorly determined and the homography better.
 	/// Off by default: measured, it cost the walk more than it gained elsewhere (docs/geometry.md).
 	double min_parallax_px = 0;
-	/// The anchored depth test: a followed point's depth against where its first measured position, carried
-	/// by the camera's motion since, puts it. Tested once the track is this many frames old (the noise of one
-	/// measurement at each end does not grow with time, a walker's drift does); 0 = off, the default: it
-	/// finds some of the walker heading at the camera, but a background point whose stereo window a passing
-	/// mover's edge enters fails it too (docs/geometry.md has both figures). 6 is a useful value to try.
-	int anchor_min_frames = 0;
+	/// The anchored depth test: a followed point's depth against where its first measured positions (their
+	/// mean), carried by the camera's motion since, put it. Tested once the track is this many frames old
+	/// (the noise at each end does not grow with time, a walker's drift does); 0 = off. On since stop 28,
+	/// when tracks whose depth leaps (anchor_max_speed_mps) started their anchor again: before, a track that
+	/// passed from a mover onto the background failed it (docs/geometry.md has the figures).
+	int anchor_min_frames = 6;
 	int anchor_max_frames = 90; ///< re-anchored after this many (the chained pose drifts slowly)
+	/// A track whose depth changes from the last one measured by more than this speed allows in the time
+	/// since (plus the two depths' noise at the chi-square gate) is anchored again instead of tested: a track
+	/// passing from a mover onto the background behind it leaps by metres. 0 = no such check.
+	double anchor_max_speed_mps = 3.0;
 	/// Motion prior: the camera keeps its velocity within these accelerations between frames. Only points
 	/// the predicted motion explains within what the accelerations allow may vote. Without it a near,
 	/// well-textured mover can win RANSAC: far points cannot tell a turn from a sideways step, so "the

@@ -141,35 +141,23 @@ void anchor_tracks(TrackSet &tracks, std::span<const Match> matches, const Frame
 		   std::vector<uint8_t> &failed)
 {
 	failed.resize(matches.size(), 0);
-	const geometry::Pose curr_from_world = world_from_curr.inverse();
 	const double gate = chi2_quantile(1, params.ego.chi2_quantile);
+	const AnchorParams anchor{params.ego.anchor_min_frames, params.ego.anchor_max_frames,
+				  params.ego.anchor_max_speed_mps, gate};
 	const bool have_texture = classification.texture_agrees.size() == matches.size();
 	for (size_t i = 0; i < matches.size(); ++i) {
 		const auto c = static_cast<size_t>(matches[i].cur);
 		if (c >= tracks.by_keypoint.size() || c >= cur.xyz.size())
 			continue;
-		TrackState &state = tracks.by_keypoint[c];
 		const cv::Vec3f &xyz = cur.xyz[c];
-		const bool has_depth = std::isfinite(xyz[2]) && xyz[2] > 0;
-		const double sigma = has_depth ? rig.depth_sigma(xyz[2], params.stereo.disparity_sigma_px) : 0;
-		const bool anchored = std::isfinite(state.anchor_world[0]);
-		if (!anchored || state.anchor_age > static_cast<uint32_t>(params.ego.anchor_max_frames)) {
-			state.anchor_world = cv::Vec3f(kNaN, kNaN, kNaN);
-			if (has_depth && classification.labels[i] != PointLabel::Dynamic) {
-				const cv::Vec3d w = world_from_curr * cv::Vec3d(xyz[0], xyz[1], xyz[2]);
-				state.anchor_world = cv::Vec3f(static_cast<float>(w[0]), static_cast<float>(w[1]),
-							       static_cast<float>(w[2]));
-				state.anchor_sigma_m = static_cast<float>(sigma);
-				state.anchor_age = 0;
-			}
-			continue;
-		}
-		if (!has_depth || state.anchor_age < static_cast<uint32_t>(params.ego.anchor_min_frames) ||
-		    (have_texture && classification.texture_agrees[i] == 0))
-			continue;
-		const double statistic = anchored_depth_statistic(state.anchor_world, state.anchor_sigma_m,
-								  curr_from_world, xyz[2], sigma);
-		if (!(statistic > gate))
+		std::optional<DepthSample> depth;
+		if (std::isfinite(xyz[2]) && xyz[2] > 0)
+			depth = DepthSample{cv::Vec3d(xyz[0], xyz[1], xyz[2]),
+					    rig.depth_sigma(xyz[2], params.stereo.disparity_sigma_px)};
+		const double statistic =
+			advance_anchor(tracks.by_keypoint[c], depth, classification.labels[i] != PointLabel::Dynamic,
+				       tracks.t_ns, world_from_curr, anchor);
+		if (!(statistic > gate) || (have_texture && classification.texture_agrees[i] == 0))
 			continue;
 		// Like the per-frame test, confirmed by a failure in the frame before (ego.confirm_frames).
 		failed[i] = 1;

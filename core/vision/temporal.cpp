@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "core/vision/ego.hpp"
+
 namespace stereod::vision {
 
 TrackSet follow_tracks(const TrackSet *prev, const FollowInput &input, const ClassifierParams &classifier,
@@ -52,6 +54,10 @@ TrackSet follow_tracks(const TrackSet *prev, const FollowInput &input, const Cla
 		after.anchor_world = before.anchor_world;
 		after.anchor_sigma_m = before.anchor_sigma_m;
 		after.anchor_age = before.anchor_age + 1;
+		after.anchor_samples = before.anchor_samples;
+		after.last_world = before.last_world;
+		after.last_sigma_m = before.last_sigma_m;
+		after.last_t_ns = before.last_t_ns;
 	}
 	for (auto &state : out.by_keypoint)
 		if (state.id == 0)
@@ -114,6 +120,64 @@ int promote_remembered_movers(std::span<PointLabel> labels, std::span<const Matc
 		}
 	}
 	return promoted;
+}
+
+double advance_anchor(TrackState &state, const std::optional<DepthSample> &depth, bool may_start, int64_t t_ns,
+		      const geometry::Pose &world_from_camera, const AnchorParams &params)
+{
+	constexpr double kNone = std::numeric_limits<double>::quiet_NaN();
+	const geometry::Pose camera_from_world = world_from_camera.inverse();
+	bool anchored = std::isfinite(state.anchor_world[0]);
+	std::optional<cv::Vec3d> world;
+	if (depth) {
+		world = world_from_camera * depth->xyz_camera;
+		if (std::isfinite(state.last_world[0]) && params.max_speed_mps > 0) {
+			const cv::Vec3d seen = camera_from_world *
+					       cv::Vec3d(state.last_world[0], state.last_world[1], state.last_world[2]);
+			const double elapsed_s = static_cast<double>(t_ns - state.last_t_ns) * 1e-9;
+			const double leap = std::abs(seen[2] - depth->xyz_camera[2]) - params.max_speed_mps * elapsed_s;
+			const double noise = static_cast<double>(state.last_sigma_m) * state.last_sigma_m +
+					     depth->sigma_m * depth->sigma_m;
+			if (leap > 0 && leap * leap > params.gate * noise)
+				anchored = false;
+		}
+		state.last_world = cv::Vec3f(static_cast<float>((*world)[0]), static_cast<float>((*world)[1]),
+					     static_cast<float>((*world)[2]));
+		state.last_sigma_m = static_cast<float>(depth->sigma_m);
+		state.last_t_ns = t_ns;
+	}
+	const auto as_float = [](const cv::Vec3d &v) {
+		return cv::Vec3f(static_cast<float>(v[0]), static_cast<float>(v[1]), static_cast<float>(v[2]));
+	};
+	if (!anchored || state.anchor_age > static_cast<uint32_t>(params.max_frames)) {
+		state.anchor_world = cv::Vec3f(std::numeric_limits<float>::quiet_NaN(), 0, 0);
+		state.anchor_samples = 0;
+		if (world && may_start) {
+			state.anchor_world = as_float(*world);
+			state.anchor_sigma_m = static_cast<float>(depth->sigma_m);
+			state.anchor_age = 0;
+			state.anchor_samples = 1;
+		}
+		return kNone;
+	}
+	if (!world)
+		return kNone;
+	if (state.anchor_age < static_cast<uint32_t>(params.min_frames)) {
+		if (may_start) { // the mean of the positions so far, and its noise
+			const auto m = static_cast<double>(state.anchor_samples);
+			cv::Vec3d mean(state.anchor_world[0], state.anchor_world[1], state.anchor_world[2]);
+			mean = (mean * m + *world) / (m + 1);
+			state.anchor_world = as_float(mean);
+			const double variance =
+				static_cast<double>(state.anchor_sigma_m) * state.anchor_sigma_m * m * m +
+				depth->sigma_m * depth->sigma_m;
+			state.anchor_sigma_m = static_cast<float>(std::sqrt(variance) / (m + 1));
+			++state.anchor_samples;
+		}
+		return kNone;
+	}
+	return anchored_depth_statistic(state.anchor_world, state.anchor_sigma_m, camera_from_world,
+					static_cast<float>(depth->xyz_camera[2]), depth->sigma_m);
 }
 
 } // namespace stereod::vision

@@ -55,6 +55,12 @@ struct TrackState {
 	cv::Vec3f anchor_world{std::numeric_limits<float>::quiet_NaN(), 0, 0};
 	float anchor_sigma_m = 0;
 	uint32_t anchor_age = 0;
+	uint32_t anchor_samples = 0; ///< depths averaged into the anchor (before the test starts)
+	/// The last depth measured on this track, in the world, its noise and when: a depth that leaps from it by
+	/// more than anything walks starts the anchor again.
+	cv::Vec3f last_world{std::numeric_limits<float>::quiet_NaN(), 0, 0};
+	float last_sigma_m = 0;
+	int64_t last_t_ns = 0;
 };
 
 /// The memory of one frame: a state per keypoint of that frame.
@@ -113,6 +119,30 @@ double jump_statistic(const TrackState &before, cv::Point2f own, const Classifie
 
 /// True when a followed point's remembered own motion clears the gate.
 bool memory_says_moving(const TrackState &state, const ClassifierParams &classifier, const TemporalParams &params);
+
+/// The anchored depth test's settings (ego.anchor_*, docs/geometry.md).
+struct AnchorParams {
+	int min_frames = 6;	    ///< the test starts once the anchor is this many frames old
+	int max_frames = 90;	    ///< then the track is anchored again (the chained pose drifts slowly)
+	double max_speed_mps = 3.0; ///< a depth leaping faster than this since the last one starts the anchor again
+	double gate = 6.63;	    ///< chi-square (1 dof) for the leap
+};
+
+/// A depth measured on a track in this frame: the point in the camera and its depth's standard deviation.
+struct DepthSample {
+	cv::Vec3d xyz_camera;
+	double sigma_m = 0;
+};
+
+/// One frame of the anchored depth test for one track. The anchor starts at the first depth (when
+/// `may_start`: not on a point already called dynamic), is the mean of the track's positions in the world
+/// until `min_frames` old (so one unlucky measurement does not fail a still point for the next 90 frames),
+/// and starts again after `max_frames`, or when the depth leaps from the last one measured by more than
+/// `max_speed_mps` allows in the time since (plus both depths' noise at `gate`): a track passing from a
+/// mover onto the background behind it. Returns the statistic (anchored_depth_statistic) when the test runs
+/// in this frame, NaN otherwise.
+double advance_anchor(TrackState &state, const std::optional<DepthSample> &depth, bool may_start, int64_t t_ns,
+		      const geometry::Pose &world_from_camera, const AnchorParams &params);
 
 /// Relabels as dynamic every matched point whose memory says it moves (labels[i] belongs to matches[i]);
 /// returns how many changed. Labels the seed already made dynamic stay dynamic. `looser` (per match, may be

@@ -10,6 +10,7 @@
 #include "core/vision/features.hpp"
 #include "core/vision/matching.hpp"
 #include "core/vision/stereo.hpp"
+#include "core/vision/temporal.hpp"
 
 using namespace stereod;
 using namespace stereod::vision;
@@ -395,6 +396,85 @@ TEST(Stereo, CalibrationHealthWarnsPastHalfAPixel)
 	const uint64_t before = health.frames();
 	health.add(StereoSummary{500, 3, 5, 0, 4.0F});
 	EXPECT_EQ(health.frames(), before);
+}
+
+namespace {
+
+/// Runs a track through advance_anchor frame by frame at 30 fps, as the pair stage does (the track ages by
+/// one each frame); depths[n] < 0: no depth in frame n. The camera is at z = camera_step_m * n.
+std::vector<double> anchor_statistics(const std::vector<double> &depths, double sigma_m, double camera_step_m,
+				      const AnchorParams &params)
+{
+	TrackState state;
+	std::vector<double> out;
+	for (size_t n = 0; n < depths.size(); ++n) {
+		if (n > 0)
+			++state.anchor_age;
+		geometry::Pose world_from_camera;
+		world_from_camera.t = {0, 0, camera_step_m * static_cast<double>(n)};
+		std::optional<DepthSample> depth;
+		if (depths[n] > 0)
+			depth = DepthSample{cv::Vec3d(0.5, 0.2, depths[n]), sigma_m};
+		out.push_back(advance_anchor(state, depth, true, static_cast<int64_t>(n) * 33'333'333,
+					     world_from_camera, params));
+	}
+	return out;
+}
+
+} // namespace
+
+// The anchor over a track's life, by hand. A walker coming 4 cm a frame nearer from 10 m (sigma 5 cm): the
+// anchor is the mean of frames 0-5 (9.90 m, sigma sqrt(6 x 0.05^2) / 6 = 0.0204 m), so at frame 6 (9.76 m) the
+// statistic is 0.14^2 / (0.0204^2 + 0.05^2) = 6.72 and it grows as the walker comes on; a still point seen by a
+// camera walking 5 cm a frame stays at 0.
+TEST(Geometry, AnchorAveragesThenTestsADrift)
+{
+	const AnchorParams params; // min 6 frames, 3 m/s, gate 6.63
+	std::vector<double> walker, still;
+	for (int n = 0; n < 12; ++n) {
+		walker.push_back(10.0 - 0.04 * n);
+		still.push_back(10.0 - 0.05 * n);
+	}
+	const auto w = anchor_statistics(walker, 0.05, 0, params);
+	for (int n = 0; n < 6; ++n)
+		EXPECT_TRUE(std::isnan(w[static_cast<size_t>(n)])) << n; // warming up
+	EXPECT_NEAR(w[6], 0.14 * 0.14 / (0.05 * 0.05 / 6 + 0.05 * 0.05), 1e-3);
+	EXPECT_NEAR(w[11], 0.34 * 0.34 / (0.05 * 0.05 / 6 + 0.05 * 0.05), 1e-3); // 0.34 m off: 39.6
+	const auto s = anchor_statistics(still, 0.05, 0.05, params);
+	for (int n = 6; n < 12; ++n)
+		EXPECT_NEAR(s[static_cast<size_t>(n)], 0, 1e-6) << n;
+}
+
+// A track that passes from a mover (12 m) onto the background behind it (14 m) leaps 2 m in a frame, far
+// more than 3 m/s allows: its anchor starts again at 14 m instead of failing the still background for the
+// next 90 frames; without the leap check it fails at once. A leap after frames without depth is judged
+// against the last depth and the time since.
+TEST(Geometry, ADepthLeapStartsTheAnchorAgain)
+{
+	std::vector<double> depths(20, 12.0);
+	for (size_t n = 8; n < depths.size(); ++n)
+		depths[n] = 14.0;
+	AnchorParams params;
+	const auto with_check = anchor_statistics(depths, 0.1, 0, params);
+	EXPECT_NEAR(with_check[7], 0, 1e-6);
+	for (size_t n = 8; n < 14; ++n)
+		EXPECT_TRUE(std::isnan(with_check[n])) << n; // anchored again at frame 8, warming up to 13
+	for (size_t n = 14; n < depths.size(); ++n)
+		EXPECT_NEAR(with_check[n], 0, 1e-6) << n;
+	params.max_speed_mps = 0;
+	const auto without = anchor_statistics(depths, 0.1, 0, params);
+	EXPECT_GT(without[8], 100);
+
+	std::vector<double> gap = depths;
+	gap[8] = gap[9] = gap[10] = -1; // no depth for three frames, then 14 m: 2 m in 4 frames, > 3 m/s x 0.13 s
+	const auto after_gap = anchor_statistics(gap, 0.1, 0, AnchorParams{});
+	EXPECT_TRUE(std::isnan(after_gap[11]));
+	EXPECT_NEAR(after_gap[17], 0, 1e-6);
+	// A walker at 1.2 m/s is no leap.
+	std::vector<double> walker;
+	for (int n = 0; n < 12; ++n)
+		walker.push_back(10.0 - 0.04 * n);
+	EXPECT_FALSE(std::isnan(anchor_statistics(walker, 0.05, 0, AnchorParams{})[11]));
 }
 
 TEST(Geometry, AnchoredDepthByHand)
