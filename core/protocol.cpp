@@ -518,19 +518,12 @@ std::string_view frame_json_schema()
         }
       }
     },
-    "people": {
-      "type": "array",
-      "items": {
-        "type": "object",
-        "properties": {
-          "box_px": {"type": "array", "items": {"type": "number"}, "minItems": 4, "maxItems": 4},
-          "score": {"type": "number"},
-          "age_frames": {"type": "integer"},
-          "class_id": {"type": "integer"}
-        }
-      }
-    },
-    "objects": {
+    "people": {"$ref": "#/$defs/prior_regions"},
+    "objects": {"$ref": "#/$defs/prior_regions"}
+  },
+  "$defs": {
+    "prior_regions": {
+      "description": "the person prior's regions: people (dynamic category), objects (potentially dynamic)",
       "type": "array",
       "items": {
         "type": "object",

@@ -398,10 +398,18 @@ TEST(McapRecording, FrameSchemaDescribesEveryFieldOfAFullMessage)
 	r.timing.push_back({"extract", 1.0});
 	const auto message = nlohmann::json::parse(protocol::frame_message(r));
 	const auto &props = schema.at("properties");
+	// A property is described in place or by a reference to the schema's $defs.
+	const auto described = [&](const nlohmann::json &property) -> const nlohmann::json & {
+		if (!property.contains("$ref"))
+			return property;
+		const std::string ref = property.at("$ref");
+		EXPECT_EQ(ref.rfind("#/$defs/", 0), 0U) << ref;
+		return schema.at("$defs").at(ref.substr(8));
+	};
 	for (const auto &[key, value] : message.items()) {
 		ASSERT_TRUE(props.contains(key)) << "frame field '" << key << "' is not in the schema";
 		if (value.is_array() && !value.empty() && value[0].is_object()) {
-			const auto &item_props = props.at(key).at("items").at("properties");
+			const auto &item_props = described(props.at(key)).at("items").at("properties");
 			for (const auto &[inner, v] : value[0].items())
 				EXPECT_TRUE(item_props.contains(inner))
 					<< key << "[]." << inner << " is not in the schema";
