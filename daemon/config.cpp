@@ -726,7 +726,7 @@ const std::vector<Option> &options()
 
 		// [prior]: seed 001's person prior (core/vision/person_prior.hpp)
 		o.push_back(boolean("prior", "enabled",
-				    "detect people (OpenCV's HOG): their points leave the motion fits",
+				    "seed 001's prior: people (prior.detector) leave the motion fits",
 				    [](DaemonConfig &c) -> bool & { return c.motion.prior.enabled; }));
 		o.push_back(number(
 			"prior", "every_n_frames", "run the detector on every n-th frame, carry its boxes between",

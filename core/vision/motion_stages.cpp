@@ -190,8 +190,9 @@ FrameFeatures extract_stage(const StereoFrame &frame, const MotionParams &params
 		StageTimer timer(timing, "prior");
 		if (params.prior.detector == PriorDetector::Hog)
 			features.people = detect_people(grey, params.prior);
-		else if (params.prior.model)
-			features.people = params.prior.model->detect(frame.left, params.prior.margin);
+		else if (params.prior.model) // colour where the frame has 8-bit colour; a deeper image as grey
+			features.people = params.prior.model->detect(frame.left.depth() == CV_8U ? frame.left : grey,
+								     params.prior.margin);
 		else // the daemon loads the model at start; a caller that did not gets no regions, not HOG's
 			features.people = std::vector<PriorRegion>{};
 	}
