@@ -235,7 +235,7 @@ cv::Mat tinted(cv::Size size, uint64_t seed, cv::Vec3b base)
 // The model in the pipeline: detected in the extract stage, published as people (dynamic category) and
 // objects (potentially dynamic), masks deciding which points are on a person. A red "person" walks 6 px,
 // a blue "chair" stands: the chair's points are judged (static), the person's marked and judged (dynamic).
-TEST(PriorModel, TheSegmenterDrivesThePriorInThePipeline)
+TEST(PriorModel, TheSegmenterDrivesThePriorThroughTheStages)
 {
 	const cv::Size size(320, 240);
 	const cv::Mat background = tinted(size, 1, {120, 120, 120});
