@@ -283,6 +283,7 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 	// the motion of the points inside them.
 	std::vector<PriorRegion> people;
 	std::vector<uint8_t> in_person(n, 0);
+	std::vector<cv::Point2f> at; // the matches' positions in this frame, for the prior's regions
 	if (params.prior.enabled) {
 		if (cur.people) {
 			people = *cur.people;
@@ -294,7 +295,7 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 			}
 			people = carry_regions(prev_tracks->people, from, to, params.prior.max_age_frames);
 		}
-		std::vector<cv::Point2f> at(n);
+		at.resize(n);
 		for (size_t i = 0; i < n; ++i)
 			at[i] = pairs[i].cur;
 		in_person = in_dynamic_category(at, people);
@@ -423,9 +424,6 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 				  params.prior.memory_chi2);
 	if (params.prior.enabled && !people.empty()) {
 		// Seed 001's potentially dynamic objects: judged point by point above, then as a whole.
-		std::vector<cv::Point2f> at(n);
-		for (size_t i = 0; i < n; ++i)
-			at[i] = pairs[i].cur;
 		vote_potentially_dynamic(at, people, classification.labels, params.prior.object_vote);
 	}
 	// The camera in the world: chained on from the previous frame, or carried over when no pose was found.
