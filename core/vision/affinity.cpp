@@ -179,55 +179,62 @@ const AffinityResult &AffinityPropagation::cluster(const cv::Mat &samples, const
 		self_edge_[i] = static_cast<uint32_t>(i * (k + 1) + k);
 	}
 	if (params.symmetric) {
-		// j among i's nearest gives the pair both ways: messages flow between them in both directions.
-		links_.clear();
+		// j among i's nearest gives the pair both ways: messages flow between them in both directions. The
+		// links are placed by row with a counting pass (each row's share known up front), then each row,
+		// at most 2 k + 1 long, is sorted by column and its doubles (j and i each among the other's
+		// nearest) dropped: no sort over all N k links.
+		std::fill(row_start_.begin(), row_start_.end(), 0u);
 		for (size_t i = 0; i < n; ++i)
 			for (size_t e = i * (k + 1); e < (i + 1) * (k + 1); ++e) {
-				links_.push_back({static_cast<uint32_t>(i), column_[e], similarity_[e]});
+				++row_start_[i + 1];
 				if (column_[e] != i)
-					links_.push_back({column_[e], static_cast<uint32_t>(i), similarity_[e]});
+					++row_start_[column_[e] + 1];
 			}
-		std::sort(links_.begin(), links_.end(), [](const Link &a, const Link &b) {
-			return a.row < b.row || (a.row == b.row && a.column < b.column);
-		});
-		links_.erase(std::unique(links_.begin(), links_.end(),
-					 [](const Link &a, const Link &b) {
-						 return a.row == b.row && a.column == b.column;
-					 }),
-			     links_.end());
-		edges = links_.size();
+		std::partial_sum(row_start_.begin(), row_start_.end(), row_start_.begin());
+		links_.resize(row_start_[n]);
+		order_.assign(row_start_.begin(), row_start_.end() - 1); // each row's fill cursor
+		for (size_t i = 0; i < n; ++i)
+			for (size_t e = i * (k + 1); e < (i + 1) * (k + 1); ++e) {
+				const uint32_t j = column_[e];
+				links_[order_[i]++] = {static_cast<uint32_t>(i), j, similarity_[e]};
+				if (j != i)
+					links_[order_[j]++] = {j, static_cast<uint32_t>(i), similarity_[e]};
+			}
+		edges = 0;
+		column_.resize(links_.size());
+		similarity_.resize(links_.size());
+		for (size_t i = 0; i < n; ++i) {
+			const auto first = links_.begin() + row_start_[i], last = links_.begin() + row_start_[i + 1];
+			std::sort(first, last, [](const Link &x, const Link &y) { return x.column < y.column; });
+			row_start_[i] = static_cast<uint32_t>(edges);
+			for (auto link = first; link != last; ++link) {
+				if (link != first && link->column == (link - 1)->column)
+					continue;
+				if (link->column == i)
+					self_edge_[i] = static_cast<uint32_t>(edges);
+				column_[edges] = link->column;
+				similarity_[edges] = link->similarity;
+				++edges;
+			}
+		}
+		row_start_[n] = static_cast<uint32_t>(edges);
 		column_.resize(edges);
 		similarity_.resize(edges);
-		std::fill(row_start_.begin(), row_start_.end(), 0u);
-		for (size_t e = 0; e < edges; ++e) {
-			column_[e] = links_[e].column;
-			similarity_[e] = links_[e].similarity;
-			++row_start_[links_[e].row + 1];
-			if (links_[e].row == links_[e].column)
-				self_edge_[links_[e].row] = static_cast<uint32_t>(e);
-		}
-		std::partial_sum(row_start_.begin(), row_start_.end(), row_start_.begin());
-	}
-	// Column index: the edges pointing at each sample, for the availability update.
-	column_start_.assign(n + 1, 0);
-	for (size_t e = 0; e < edges; ++e)
-		++column_start_[column_[e] + 1];
-	std::partial_sum(column_start_.begin(), column_start_.end(), column_start_.begin());
-	column_edges_.resize(edges);
-	positive_sum_.assign(n, 0); // used as a fill cursor first
-	for (size_t e = 0; e < edges; ++e) {
-		const uint32_t c = column_[e];
-		column_edges_[column_start_[c] + static_cast<uint32_t>(positive_sum_[c])] = static_cast<uint32_t>(e);
-		positive_sum_[c] += 1;
 	}
 	responsibility_.assign(edges, 0);
 	availability_.assign(edges, 0);
 	exemplar_flag_.assign(n, 0);
+	positive_sum_.resize(n);
+	self_responsibility_.resize(n);
 	const auto lambda = static_cast<float>(params.damping);
 	int unchanged = 0;
 	int iteration = 0;
 	for (; iteration < params.max_iterations; ++iteration) {
-		// Responsibilities: r(i,k) = s(i,k) - max over k' != k of (a(i,k') + s(i,k')).
+		// Responsibilities: r(i,k) = s(i,k) - max over k' != k of (a(i,k') + s(i,k')). In the same pass
+		// over the edges, row by row, each column's sum of positive responsibilities from the others, for
+		// the availabilities: scattered into an array of N that stays in cache, where walking the edges
+		// column by column would jump about arrays of N k.
+		std::fill(positive_sum_.begin(), positive_sum_.end(), 0.F);
 		for (size_t i = 0; i < n; ++i) {
 			float best = -std::numeric_limits<float>::infinity(), second = best;
 			size_t best_edge = 0;
@@ -243,28 +250,24 @@ const AffinityResult &AffinityPropagation::cluster(const cv::Mat &samples, const
 			}
 			for (size_t e = row_start_[i]; e < row_start_[i + 1]; ++e) {
 				const float update = similarity_[e] - (e == best_edge ? second : best);
-				responsibility_[e] = lambda * responsibility_[e] + (1 - lambda) * update;
+				const float r = lambda * responsibility_[e] + (1 - lambda) * update;
+				responsibility_[e] = r;
+				if (e != self_edge_[i])
+					positive_sum_[column_[e]] += std::max(0.F, r);
 			}
+			self_responsibility_[i] = responsibility_[self_edge_[i]];
 		}
 		// Availabilities: a(i,k) = min(0, r(k,k) + sum over i' not in {i,k} of max(0, r(i',k)));
 		// a(k,k) = sum over i' != k of max(0, r(i',k)).
-		for (size_t c = 0; c < n; ++c) {
-			float sum = 0;
-			for (size_t idx = column_start_[c]; idx < column_start_[c + 1]; ++idx) {
-				const uint32_t e = column_edges_[idx];
-				if (e != self_edge_[c])
-					sum += std::max(0.f, responsibility_[e]);
-			}
-			const float self_r = responsibility_[self_edge_[c]];
-			for (size_t idx = column_start_[c]; idx < column_start_[c + 1]; ++idx) {
-				const uint32_t e = column_edges_[idx];
+		for (size_t i = 0; i < n; ++i)
+			for (size_t e = row_start_[i]; e < row_start_[i + 1]; ++e) {
+				const uint32_t c = column_[e];
 				const float update =
-					e == self_edge_[c]
-						? sum
-						: std::min(0.f, self_r + sum - std::max(0.f, responsibility_[e]));
+					e == self_edge_[i] ? positive_sum_[c]
+							   : std::min(0.F, self_responsibility_[c] + positive_sum_[c] -
+										   std::max(0.F, responsibility_[e]));
 				availability_[e] = lambda * availability_[e] + (1 - lambda) * update;
 			}
-		}
 		bool changed = false;
 		for (size_t i = 0; i < n; ++i) {
 			const uint8_t is = responsibility_[self_edge_[i]] + availability_[self_edge_[i]] > 0 ? 1 : 0;

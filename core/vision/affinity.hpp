@@ -53,9 +53,9 @@ private:
 	// Edges in row-major order: row i's edges are [row_start_[i], row_start_[i + 1]); its last is (i, i).
 	std::vector<uint32_t> row_start_, column_;
 	std::vector<float> similarity_, responsibility_, availability_;
-	std::vector<uint32_t> column_start_, column_edges_, self_edge_;
-	std::vector<float> positive_sum_;
-	std::vector<std::pair<float, uint32_t>> nearest_; ///< one sample's k nearest so far (a max-heap)
+	std::vector<uint32_t> self_edge_;
+	std::vector<float> positive_sum_, self_responsibility_; ///< per column, for the availabilities
+	std::vector<std::pair<float, uint32_t>> nearest_;	///< one sample's k nearest so far (a max-heap)
 	struct Link {
 		uint32_t row, column;
 		float similarity;
