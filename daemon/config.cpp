@@ -676,8 +676,9 @@ const std::vector<Option> &options()
 			[](DaemonConfig &c) -> int & { return c.motion.groups.split_gap_cells; }, -1, 1000));
 		o.push_back(number(
 			"groups", "split_same_depth",
-			"lk / dis: regions of a cut cluster whose median depths agree within this share of the nearer "
-			"stay one (0: depth not looked at)",
+			"lk / dis: regions of a cut cluster, and clusters that move alike no farther apart than the "
+			"larger one's longer side, whose median depths agree within this share of the nearer are one "
+			"group (0: depth not looked at)",
 			[](DaemonConfig &c) -> double & { return c.motion.groups.split_same_depth; }, 0, 10));
 		o.push_back(number(
 			"groups", "neighbours", "Affinity Propagation: messages to this many nearest samples",

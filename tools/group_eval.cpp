@@ -118,11 +118,23 @@ void GroupScore::add(const FrameResult &result, const cv::Mat &mask, const std::
 	if (movers.empty()) {
 		++frames_without_movers;
 		groups_without_movers += gs.size();
-	} else if (movers_separated(movers, separation_margin_px)) {
+	}
+	const bool separated = !movers.empty() && movers_separated(movers, separation_margin_px);
+	const std::vector<int> on = match_groups(gs, mask);
+	if (separated) {
 		++frames_separated;
 		count_exact += gs.size() == movers.size() ? 1 : 0;
+		count_over += gs.size() > movers.size() ? 1 : 0;
+		count_under += gs.size() < movers.size() ? 1 : 0;
+		separated_groups += gs.size();
+		separated_groups_off += static_cast<uint64_t>(std::count(on.begin(), on.end(), 0));
+		for (const auto &mover : movers) {
+			const auto groups_on = std::count(on.begin(), on.end(), mover.id);
+			++separated_mover_views;
+			separated_movers_split += groups_on >= 2 ? 1 : 0;
+			separated_movers_missed += groups_on == 0 ? 1 : 0;
+		}
 	}
-	const std::vector<int> on = match_groups(gs, mask);
 	std::vector<cv::Rect> boxes;
 	boxes.reserve(gs.size());
 	for (const auto &g : gs)
@@ -212,6 +224,24 @@ std::string group_score_table(const std::string &name, const GroupScore &s)
 	    << median(s.speed_relative_error) << " | " << fraction_below(s.speed_relative_error, 0.10) << " | "
 	    << std::setprecision(1) << median(s.heading_error_deg) << " | " << std::setprecision(3)
 	    << fraction_below(s.heading_error_deg, 15.0) << " | " << s.id_switches << " |\n";
+	return out.str();
+}
+
+std::string group_count_table(const std::string &name, const GroupScore &s)
+{
+	std::ostringstream out;
+	const auto ratio = [](uint64_t a, uint64_t b) {
+		return b > 0 ? static_cast<double>(a) / static_cast<double>(b) : std::nan("");
+	};
+	out << std::fixed << std::setprecision(3);
+	out << "| scene | separated frames | count exact | too many groups | too few | mover views | split (>= 2 "
+	       "groups) | missed (none) | groups | on no mover |\n";
+	out << "|---|---|---|---|---|---|---|---|---|---|\n";
+	out << "| " << name << " | " << s.frames_separated << " | " << ratio(s.count_exact, s.frames_separated) << " | "
+	    << ratio(s.count_over, s.frames_separated) << " | " << ratio(s.count_under, s.frames_separated) << " | "
+	    << s.separated_mover_views << " | " << ratio(s.separated_movers_split, s.separated_mover_views) << " | "
+	    << ratio(s.separated_movers_missed, s.separated_mover_views) << " | " << s.separated_groups << " | "
+	    << ratio(s.separated_groups_off, s.separated_groups) << " |\n";
 	return out.str();
 }
 

@@ -45,6 +45,11 @@ struct GroupScore {
 	uint64_t frames = 0;	       ///< frames scored (with a mask)
 	uint64_t frames_separated = 0; ///< with at least one mover in view, all apart
 	uint64_t count_exact = 0;      ///< of those, as many groups as movers
+	// Why the count is off, in the separated frames: frames with too many or too few groups; mover views
+	// with two or more groups on the mover, or none; groups on no mover.
+	uint64_t count_over = 0, count_under = 0;
+	uint64_t separated_mover_views = 0, separated_movers_split = 0, separated_movers_missed = 0;
+	uint64_t separated_groups = 0, separated_groups_off = 0;
 	uint64_t frames_without_movers = 0;
 	uint64_t groups_without_movers = 0; ///< groups in frames where no mover is in view
 	uint64_t groups = 0;
@@ -75,5 +80,8 @@ struct GroupScore {
 /// The share of `values` under `limit`; NaN when empty (the median is tools::median, evaluation.hpp).
 double fraction_below(const std::vector<double> &values, double limit);
 std::string group_score_table(const std::string &name, const GroupScore &score);
+/// The second table: in the separated frames, how the count goes wrong (too many / too few groups, movers
+/// split or missed, groups off every mover).
+std::string group_count_table(const std::string &name, const GroupScore &score);
 
 } // namespace stereod::tools

@@ -188,7 +188,8 @@ cv::Mat load_mask(const fs::path &dir, uint64_t seq)
 }
 
 /// Moving-target groups against the truth's movers (tools/group_eval.hpp).
-int eval_groups(const std::string &results_path, const std::string &truth_dir, const std::string &name, bool json_out)
+int eval_groups(const std::string &results_path, const std::string &truth_dir, const std::string &name, bool json_out,
+		bool count_detail)
 {
 	std::map<uint64_t, nlohmann::json> truth_lines;
 	{
@@ -242,11 +243,21 @@ int eval_groups(const std::string &results_path, const std::string &truth_dir, c
 					    {"heading_error_deg", tools::median(score.heading_error_deg)},
 					    {"heading_within_15_deg",
 					     tools::fraction_below(score.heading_error_deg, 15)},
-					    {"id_switches", score.id_switches}}
+					    {"id_switches", score.id_switches},
+					    {"count_too_many", ratio(score.count_over, score.frames_separated)},
+					    {"count_too_few", ratio(score.count_under, score.frames_separated)},
+					    {"movers_split",
+					     ratio(score.separated_movers_split, score.separated_mover_views)},
+					    {"movers_missed",
+					     ratio(score.separated_movers_missed, score.separated_mover_views)},
+					    {"groups_off_movers",
+					     ratio(score.separated_groups_off, score.separated_groups)}}
 				     .dump()
 			  << "\n";
 	} else {
 		std::cout << "\n" << tools::group_score_table(name, score);
+		if (count_detail)
+			std::cout << "\n" << tools::group_count_table(name, score);
 	}
 	return 0;
 }
@@ -629,10 +640,13 @@ int main(int argc, char **argv)
 	eval_cmd->add_flag("--json", eval_json, "print one JSON object instead of the table");
 	eval_cmd->add_option("--errors", eval_errors_csv,
 			     "write every wrongly labelled point (position, mover, distance to its outline, depth)");
-	bool eval_per_mover = false, eval_groups_only = false;
+	bool eval_per_mover = false, eval_groups_only = false, eval_count_detail = false;
 	eval_cmd->add_flag("--per-mover", eval_per_mover, "also a table of labels per mover (mask id)");
 	eval_cmd->add_flag("--groups", eval_groups_only,
 			   "score the moving-target groups against the truth's movers instead of the labels");
+	eval_cmd->add_flag("--count-detail", eval_count_detail,
+			   "with --groups: a second table of how the count goes wrong in the separated frames (too "
+			   "many / too few groups, movers split or missed, groups on no mover)");
 
 	auto *render_cmd = app.add_subcommand("render", "draw results onto the input's frames");
 	tools::SourceOptions render_opts;
@@ -682,7 +696,7 @@ int main(int argc, char **argv)
 			}
 			int rc = 0;
 			if (!eval_truth.empty() && eval_groups_only)
-				return eval_groups(eval_results, eval_truth, eval_name, eval_json);
+				return eval_groups(eval_results, eval_truth, eval_name, eval_json, eval_count_detail);
 			if (!eval_truth.empty())
 				rc = eval(eval_results, eval_truth, eval_name, eval_border, eval_coverage, eval_csv,
 					  eval_json, eval_per_mover, eval_errors_csv);

@@ -208,30 +208,64 @@ std::vector<std::vector<uint32_t>> connected_parts(const std::vector<uint32_t> &
 	return parts;
 }
 
-/// Clusters whose boxes touch (within merge_gap_px) and that move alike (the join rule on their median
-/// residuals) are one: Affinity Propagation over a dense grid, whose exemplars only reach their nearest
-/// samples, cuts a large mover into pieces.
-void merge_touching(std::vector<std::vector<uint32_t>> &clusters, const std::vector<MotionPoint> &points,
-		    const GroupParams &params)
+/// The median depth of the members that have one; nullopt with fewer than three.
+std::optional<float> median_depth(const std::vector<uint32_t> &members, const std::vector<MotionPoint> &points)
+{
+	std::vector<float> depths;
+	for (const uint32_t i : members)
+		if (const auto &xyz = points[i].xyz; xyz && (*xyz)[2] > 0)
+			depths.push_back(static_cast<float>((*xyz)[2]));
+	if (depths.size() < 3)
+		return std::nullopt;
+	return median_of(depths);
+}
+
+/// Clusters that move alike (the join rule on their median residuals) are one when their boxes touch
+/// (within merge_gap_px), or, for the dense flow's cells with depth, when their median depths agree within
+/// split_same_depth of the nearer and the gap between their boxes is no wider than the larger box's longer
+/// side. Affinity
+/// Propagation over many samples, whose exemplars only reach their k nearest, cuts a large mover into
+/// pieces; a weakly textured one shows its motion at a few spots apart, all at one depth (the rule
+/// connected_parts applies inside a cluster), where two movers side by side are rarely at one distance.
+void merge_alike(std::vector<std::vector<uint32_t>> &clusters, const std::vector<MotionPoint> &points,
+		 const GroupParams &params)
 {
 	bool merged = true;
 	while (merged && clusters.size() > 1) {
 		merged = false;
-		std::vector<cv::Rect2f> boxes;
+		std::vector<cv::Rect2f> extents;
 		std::vector<cv::Point2f> motion;
+		std::vector<std::optional<float>> depth;
 		for (const auto &members : clusters) {
-			const cv::Rect2f e = extent_of(members, points);
-			const auto gap = static_cast<float>(params.box_margin_px + 0.5 * params.merge_gap_px);
-			boxes.emplace_back(e.x - gap, e.y - gap, e.width + 2 * gap, e.height + 2 * gap);
+			extents.push_back(extent_of(members, points));
 			motion.push_back(median_residual(members, points));
+			depth.push_back(params.member_area_px2 > 0 && params.split_same_depth > 0
+						? median_depth(members, points)
+						: std::nullopt);
 		}
+		const auto grown = [](const cv::Rect2f &r, double by) {
+			const auto g = static_cast<float>(by);
+			return cv::Rect2f(r.x - g, r.y - g, r.width + 2 * g, r.height + 2 * g);
+		};
 		for (size_t a = 0; a < clusters.size() && !merged; ++a)
 			for (size_t b = a + 1; b < clusters.size() && !merged; ++b) {
-				if ((boxes[a] & boxes[b]).area() <= 0)
-					continue;
 				const double strength = std::max(cv::norm(motion[a]), cv::norm(motion[b]));
 				const double off = cv::norm(motion[a] - motion[b]);
-				if (off <= std::max(params.label_tolerance_px, 0.5 * strength)) {
+				if (off > std::max(params.label_tolerance_px, 0.5 * strength))
+					continue;
+				const double touch = params.box_margin_px + 0.5 * params.merge_gap_px;
+				bool join = params.merge_gap_px >= 0 &&
+					    (grown(extents[a], touch) & grown(extents[b], touch)).area() > 0;
+				if (!join && depth[a] && depth[b] &&
+				    std::abs(*depth[a] - *depth[b]) <=
+					    params.split_same_depth * std::min(*depth[a], *depth[b])) {
+					const double side = std::max({extents[a].width, extents[a].height,
+								      extents[b].width, extents[b].height}) +
+							    2 * params.box_margin_px;
+					join = (grown(extents[a], 0.5 * side) & grown(extents[b], 0.5 * side)).area() >
+					       0;
+				}
+				if (join) {
 					clusters[a].insert(clusters[a].end(), clusters[b].begin(), clusters[b].end());
 					clusters.erase(clusters.begin() + static_cast<std::ptrdiff_t>(b));
 					merged = true;
@@ -351,13 +385,14 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 				kept.push_back(std::move(members));
 			}
 		}
-		if (params.merge_gap_px >= 0)
-			merge_touching(kept, points, params);
+		// The fill rule on each piece before the merge: pieces of one mover joined across the gaps between
+		// them fill their common box less than each its own.
 		if (params.member_area_px2 > 0) {
 			std::erase_if(kept, [&](const std::vector<uint32_t> &members) {
 				return box_fill(members, points, params) < params.min_box_fill;
 			});
 		}
+		merge_alike(kept, points, params);
 		for (auto &members : kept)
 			clusters.push_back(
 				measure(std::move(members), points, context, static_cast<float>(params.box_margin_px)));

@@ -255,6 +255,64 @@ TEST(DenseFlow, MoversApartAreCutIntoRegionsUnlessAtOneDepth)
 	}
 }
 
+TEST(DenseFlow, PiecesOfOneMoverAtOneDepthAreOneGroup)
+{
+	// Two 48x96 textured patches moving alike 4 px per frame to the right, `gap` px apart, clustered with the
+	// pipeline's settings (k nearest, the seed's preference). A mover's pieces that move alike and lie at one
+	// depth are one group when the gap between them is no wider than the larger piece's longer side (96 px
+	// here), two when the depths differ (5 m and 8 m), when there is no depth (monocular: two people walking
+	// alike), or when they are farther apart than that.
+	const cv::Size size(640, 480);
+	const cv::Mat background = texture(size, 13);
+	const cv::Mat patch_a = texture({48, 96}, 14), patch_b = texture({48, 96}, 15);
+	DenseFlowParams params;
+	params.method = GroupFlow::PyrLk;
+	params.scale = 1.0;
+	struct Case {
+		int gap;
+		float depth_b; // patch B's depth; A's is 5 m; 0: no depth anywhere
+		size_t groups;
+	};
+	for (const Case c : {Case{64, 5, 1}, Case{64, 8, 2}, Case{64, 0, 2}, Case{240, 5, 2}}) {
+		const int b_x = 100 + 48 + c.gap;
+		auto frame = [&](int n) {
+			cv::Mat image = background.clone();
+			patch_a.copyTo(image(cv::Rect(100 + 4 * n, 160, patch_a.cols, patch_a.rows)));
+			patch_b.copyTo(image(cv::Rect(b_x + 4 * n, 160, patch_b.cols, patch_b.rows)));
+			return image;
+		};
+		GroupParams group_params;
+		group_params.members = GroupMembers::Flow;
+		group_params.box_margin_px = 0.5 * params.step_px;
+		group_params.member_area_px2 = params.step_px * params.step_px; // as the pipeline sets them
+		group_params.min_points = params.min_cells;
+		cv::Ptr<cv::DISOpticalFlow> dis;
+		AffinityPropagation workspace;
+		GroupMemory memory;
+		GroupMotionContext context;
+		context.dt_s = 0.1;
+		for (int n = 1; n <= 3; ++n) {
+			const CellFlow cells = dense_flow(dense_flow_image(frame(n - 1), params),
+							  dense_flow_image(frame(n), params), size, params, dis);
+			std::vector<MotionPoint> points = cell_motion(cells, params, {}, {}, {});
+			if (c.depth_b > 0)
+				for (MotionPoint &p : points)
+					p.xyz = cv::Vec3f(0, 0,
+							  p.px.x < static_cast<float>(b_x) - 8.F ? 5.F : c.depth_b);
+			const std::vector<uint32_t> strong =
+				supported_cells(strong_motion(points, group_params), cells.cols, cells.rows,
+						params.min_strong_neighbours);
+			GroupOutput out = find_groups(points, n == 1 ? nullptr : &memory, context, group_params,
+						      workspace, &strong);
+			memory = out.memory;
+			if (n == 1)
+				continue;
+			EXPECT_EQ(out.groups.size(), c.groups)
+				<< "gap " << c.gap << ", depth " << c.depth_b << ", frame " << n;
+		}
+	}
+}
+
 TEST(DenseFlow, CellDepthIsTheMedianAroundIt)
 {
 	// Cells of 8 px, radius 1: cell (2, 2) sees its own points (median 2 m) and its neighbour (3, 2)'s (4 m);

@@ -298,6 +298,19 @@ TEST(GroupEvaluation, PixelsOnlyReferenceScoresCountsAndCoverage)
 	EXPECT_TRUE(score.speed_relative_error.empty());
 	EXPECT_EQ(score.movers_inside, 3U);
 	EXPECT_EQ(score.movers_untouched, 1U) << "mover 2 in the first frame: no box reaches it";
+	// A third frame: mover 1 found as two groups (one of them inside the other), mover 2 missed.
+	frame.groups = {group_at(11, {98, 48, 44, 104}, 1.65, 0, {-1, 0, 5.3}),
+			group_at(12, {100, 100, 40, 50}, 1.65, 0, {-1, 0, 5.3})};
+	score.add(frame, mask, movers);
+	EXPECT_EQ(score.frames_separated, 3U);
+	EXPECT_EQ(score.count_exact, 2U) << "two groups for two movers, though both on mover 1";
+	EXPECT_EQ(score.count_over, 0U);
+	EXPECT_EQ(score.count_under, 1U) << "the first frame";
+	EXPECT_EQ(score.separated_mover_views, 6U);
+	EXPECT_EQ(score.separated_movers_split, 1U);
+	EXPECT_EQ(score.separated_movers_missed, 2U) << "mover 2 in the first and third frames";
+	EXPECT_EQ(score.separated_groups, 5U);
+	EXPECT_EQ(score.separated_groups_off, 0U);
 }
 
 // "Inside a group box" counts a mover whose pixels lie mostly in the box of a group on a mover even when that
