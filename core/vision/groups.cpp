@@ -427,6 +427,33 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 			track_of_cluster[cand.cluster] = static_cast<int>(cand.track);
 			track_taken[cand.track] = 1;
 		}
+	// Then a cluster no track's centre reached takes the track whose predicted box it overlaps most, when
+	// the two move alike (the join rule on their residuals): a large mover found in pieces has centres that
+	// jump about inside it from frame to frame, farther than the gate, while its box stays put.
+	for (size_t c = 0; c < clusters.size(); ++c) {
+		if (track_of_cluster[c] >= 0)
+			continue;
+		double best_overlap = 0;
+		for (size_t t = 0; t < before.size(); ++t) {
+			if (track_taken[t])
+				continue;
+			const cv::Point2f shift = before[t].image_velocity_pxps * static_cast<float>(context.dt_s) *
+						  static_cast<float>(1 + before[t].missed_frames);
+			const cv::Rect2f predicted(before[t].box.tl() + shift, before[t].box.size());
+			const float overlap = (predicted & clusters[c].box).area();
+			const float smaller = std::min(predicted.area(), clusters[c].box.area());
+			const cv::Point2f r = clusters[c].residual, g = before[t].residual;
+			const double strength = std::max(cv::norm(r), cv::norm(g));
+			if (smaller > 0 && overlap / smaller > best_overlap && overlap >= 0.5F * smaller &&
+			    cv::norm(r - g) <= std::max(params.label_tolerance_px, 0.5 * strength)) {
+				best_overlap = overlap / smaller;
+				if (track_of_cluster[c] >= 0)
+					track_taken[static_cast<size_t>(track_of_cluster[c])] = 0;
+				track_of_cluster[c] = static_cast<int>(t);
+				track_taken[t] = 1;
+			}
+		}
+	}
 	const double fps = context.dt_s > 0 ? 1.0 / context.dt_s : 0;
 	for (size_t c = 0; c < clusters.size(); ++c) {
 		const Cluster &cluster = clusters[c];
@@ -448,6 +475,7 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 		if (cluster.world_velocity)
 			g.world_velocity_mps = blend(old != nullptr ? old->world_velocity_mps : std::nullopt,
 						     *cluster.world_velocity, params.smoothing);
+		g.residual = cluster.residual;
 		if (g.age_frames < params.min_age_frames) {
 			out.memory.groups.push_back(g);
 			continue;

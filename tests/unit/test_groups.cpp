@@ -1,4 +1,5 @@
 // Affinity Propagation and the grouping of moving points, on constructed data with known answers.
+#include <algorithm>
 #include <array>
 #include <random>
 
@@ -259,6 +260,70 @@ TEST(Groups, AMissedGroupCoastsOnItsVelocityKeepingItsId)
 		} else {
 			EXPECT_EQ(g.point_count, 20) << "frame " << frame;
 			last_box = g.box_px;
+		}
+	}
+}
+
+TEST(Groups, AMoverSeenFirstInPartThenWholeKeepsItsId)
+{
+	// A mover 160 x 200 px moving 6 px per frame to the right: for three frames only a 40 x 40 px piece in
+	// its top-left corner shows motion (a weakly textured mover), then all of it. The whole one's centre lies
+	// ~100 px from where the piece's was predicted, beyond the gate (60 px, or half the piece's diagonal),
+	// but its box holds the piece's predicted box and it moves alike: the same mover, the same id. A cluster
+	// that moves otherwise over the same place does not take the id.
+	for (const float whole_speed : {6.F, -6.F}) {
+		std::mt19937 rng(9);
+		std::normal_distribution<float> noise(0.f, 0.2f);
+		GroupParams params;
+		params.affinity.neighbours = 1000; // one cluster for the whole mover
+		params.affinity.preference_scale = 2;
+		AffinityPropagation workspace;
+		GroupMemory memory;
+		GroupMotionContext context;
+		context.dt_s = 0.1;
+		int id = 0;
+		for (int frame = 0; frame < 6; ++frame) {
+			const bool whole = frame >= 3;
+			const float speed = whole ? whole_speed : 6.F;
+			const float x0 = 100.F + 6.F * static_cast<float>(frame), y0 = 100.F;
+			std::vector<MotionPoint> points;
+			for (int i = 0; i < 120; ++i) { // still background
+				MotionPoint p;
+				p.px = {static_cast<float>((i * 37) % 640), static_cast<float>((i * 53) % 480)};
+				p.residual = {noise(rng), noise(rng)};
+				p.flow = p.residual;
+				points.push_back(p);
+			}
+			const int step = whole ? 20 : 10, columns = whole ? 9 : 5, rows = whole ? 11 : 5;
+			for (int r = 0; r < rows; ++r)
+				for (int c = 0; c < columns; ++c) {
+					MotionPoint p;
+					p.px = {x0 + static_cast<float>(c * step), y0 + static_cast<float>(r * step)};
+					p.flow = {speed + noise(rng), noise(rng)};
+					p.residual = p.flow;
+					points.push_back(p);
+				}
+			GroupOutput out =
+				find_groups(points, frame == 0 ? nullptr : &memory, context, params, workspace);
+			memory = out.memory;
+			if (frame == 0)
+				continue;
+			const auto found = std::find_if(out.groups.begin(), out.groups.end(),
+							[](const TargetGroup &g) { return g.missed_frames == 0; });
+			if (whole && whole_speed < 0) {
+				// Moving the other way: not the piece's mover; its id is only on the piece's coasted
+				// box.
+				for (const TargetGroup &g : out.groups)
+					if (g.id == id) {
+						EXPECT_GT(g.missed_frames, 0) << "frame " << frame;
+					}
+				continue;
+			}
+			ASSERT_NE(found, out.groups.end()) << "frame " << frame;
+			EXPECT_EQ(found->point_count, rows * columns) << "frame " << frame;
+			if (frame == 1)
+				id = found->id;
+			EXPECT_EQ(found->id, id) << "frame " << frame;
 		}
 	}
 }
