@@ -2,6 +2,7 @@
 // a moving textured patch over a still textured background is the one group, cells get the depth of the
 // stereo points around them, lone strong cells are dropped, and feature points join a group only when they
 // move with it.
+#include <functional>
 #include <random>
 
 #include <gtest/gtest.h>
@@ -57,6 +58,44 @@ cv::Point2f median_flow(const CellFlow &cells, int margin, size_t &measured, siz
 	std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
 	return {u[u.size() / 2], v[v.size() / 2]};
 }
+
+/// The pipeline's grouping of the dense flow's cells, frame after frame: the group parameters set as the
+/// pipeline sets them for cells, the tracks carried on from one step to the next.
+struct CellGrouping {
+	DenseFlowParams flow;
+	GroupParams groups;
+	cv::Ptr<cv::DISOpticalFlow> dis;
+	AffinityPropagation workspace;
+	GroupMemory memory;
+	bool first = true;
+
+	explicit CellGrouping(const DenseFlowParams &flow_params) : flow(flow_params)
+	{
+		groups.members = GroupMembers::Flow;
+		groups.box_margin_px = 0.5 * flow.step_px;
+		groups.member_area_px2 = flow.step_px * flow.step_px;
+		groups.min_points = flow.min_cells;
+	}
+
+	/// The groups from `before` to `now`; with `depth_of`, every cell gets that depth by its column.
+	GroupOutput step(const cv::Mat &before, const cv::Mat &now, const std::function<float(float)> &depth_of = {})
+	{
+		const CellFlow cells =
+			dense_flow(dense_flow_image(before, flow), dense_flow_image(now, flow), now.size(), flow, dis);
+		std::vector<MotionPoint> points = cell_motion(cells, flow, {}, {}, {});
+		if (depth_of)
+			for (MotionPoint &p : points)
+				p.xyz = cv::Vec3f(0, 0, depth_of(p.px.x));
+		const std::vector<uint32_t> strong = supported_cells(strong_motion(points, groups), cells.cols,
+								     cells.rows, flow.min_strong_neighbours);
+		GroupMotionContext context;
+		context.dt_s = 0.1;
+		GroupOutput out = find_groups(points, first ? nullptr : &memory, context, groups, workspace, &strong);
+		memory = out.memory;
+		first = false;
+		return out;
+	}
+};
 
 } // namespace
 
@@ -203,33 +242,15 @@ TEST(DenseFlow, MoversApartAreCutIntoRegionsUnlessAtOneDepth)
 	};
 	for (const Case c : {Case{2, 0, 3}, Case{-1, 0, 2}, Case{2, 5, 2}, Case{2, 8, 3}}) {
 		const int gap = c.gap;
-		GroupParams group_params;
-		group_params.members = GroupMembers::Flow;
-		group_params.box_margin_px = 0.5 * params.step_px;
-		group_params.member_area_px2 = params.step_px * params.step_px; // as the pipeline sets them
-		group_params.min_points = params.min_cells;
-		group_params.split_gap_cells = gap;
+		CellGrouping grouping(params);
+		grouping.groups.split_gap_cells = gap;
 		// Fewer, larger clusters (every sample linked, a lower preference), as crowded footage gives.
-		group_params.affinity.neighbours = 1000;
-		group_params.affinity.preference_scale = 2;
-		cv::Ptr<cv::DISOpticalFlow> dis;
-		AffinityPropagation workspace;
-		GroupMemory memory;
-		GroupMotionContext context;
-		context.dt_s = 0.1;
+		grouping.groups.affinity.neighbours = 1000;
+		grouping.groups.affinity.preference_scale = 2;
 		for (int n = 1; n <= 4; ++n) {
-			const CellFlow cells = dense_flow(dense_flow_image(frame(n - 1), params),
-							  dense_flow_image(frame(n), params), size, params, dis);
-			std::vector<MotionPoint> points = cell_motion(cells, params, {}, {}, {});
-			if (c.depth_b > 0)
-				for (MotionPoint &p : points)
-					p.xyz = cv::Vec3f(0, 0, p.px.x < 170.F ? 5.F : c.depth_b);
-			const std::vector<uint32_t> strong =
-				supported_cells(strong_motion(points, group_params), cells.cols, cells.rows,
-						params.min_strong_neighbours);
-			GroupOutput out = find_groups(points, n == 1 ? nullptr : &memory, context, group_params,
-						      workspace, &strong);
-			memory = out.memory;
+			const auto depth = [&](float x) { return x < 170.F ? 5.F : c.depth_b; };
+			const GroupOutput out = c.depth_b > 0 ? grouping.step(frame(n - 1), frame(n), depth)
+							      : grouping.step(frame(n - 1), frame(n));
 			if (n == 1)
 				continue;
 			const std::string what = "gap " + std::to_string(gap) + ", depth " + std::to_string(c.depth_b) +
@@ -281,30 +302,11 @@ TEST(DenseFlow, PiecesOfOneMoverAtOneDepthAreOneGroup)
 			patch_b.copyTo(image(cv::Rect(b_x + 4 * n, 160, patch_b.cols, patch_b.rows)));
 			return image;
 		};
-		GroupParams group_params;
-		group_params.members = GroupMembers::Flow;
-		group_params.box_margin_px = 0.5 * params.step_px;
-		group_params.member_area_px2 = params.step_px * params.step_px; // as the pipeline sets them
-		group_params.min_points = params.min_cells;
-		cv::Ptr<cv::DISOpticalFlow> dis;
-		AffinityPropagation workspace;
-		GroupMemory memory;
-		GroupMotionContext context;
-		context.dt_s = 0.1;
+		CellGrouping grouping(params);
 		for (int n = 1; n <= 3; ++n) {
-			const CellFlow cells = dense_flow(dense_flow_image(frame(n - 1), params),
-							  dense_flow_image(frame(n), params), size, params, dis);
-			std::vector<MotionPoint> points = cell_motion(cells, params, {}, {}, {});
-			if (c.depth_b > 0)
-				for (MotionPoint &p : points)
-					p.xyz = cv::Vec3f(0, 0,
-							  p.px.x < static_cast<float>(b_x) - 8.F ? 5.F : c.depth_b);
-			const std::vector<uint32_t> strong =
-				supported_cells(strong_motion(points, group_params), cells.cols, cells.rows,
-						params.min_strong_neighbours);
-			GroupOutput out = find_groups(points, n == 1 ? nullptr : &memory, context, group_params,
-						      workspace, &strong);
-			memory = out.memory;
+			const auto depth = [&](float x) { return x < static_cast<float>(b_x) - 8.F ? 5.F : c.depth_b; };
+			const GroupOutput out = c.depth_b > 0 ? grouping.step(frame(n - 1), frame(n), depth)
+							      : grouping.step(frame(n - 1), frame(n));
 			if (n == 1)
 				continue;
 			EXPECT_EQ(out.groups.size(), c.groups)
