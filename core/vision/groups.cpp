@@ -135,6 +135,14 @@ bool moves_with(cv::Point2f r, cv::Point2f g, const GroupParams &params)
 	return off <= std::max(params.label_tolerance_px, 0.5 * cv::norm(g)) && off < cv::norm(r);
 }
 
+/// The rule two motions a and b (clusters' or tracks' median residuals) are alike by: |a - b| <=
+/// max(tolerance, half the stronger), the join rule without a side taken.
+bool move_alike(cv::Point2f a, cv::Point2f b, const GroupParams &params)
+{
+	const double strength = std::max(cv::norm(a), cv::norm(b));
+	return cv::norm(a - b) <= std::max(params.label_tolerance_px, 0.5 * strength);
+}
+
 cv::Point2f median_residual(const std::vector<uint32_t> &members, const std::vector<MotionPoint> &points)
 {
 	std::vector<float> ru, rv;
@@ -223,35 +231,37 @@ std::optional<float> median_depth(const std::vector<uint32_t> &members, const st
 /// Clusters that move alike (the join rule on their median residuals) are one when their boxes touch
 /// (within merge_gap_px), or, for the dense flow's cells with depth, when their median depths agree within
 /// split_same_depth of the nearer and the gap between their boxes is no wider than the larger box's longer
-/// side. Affinity
-/// Propagation over many samples, whose exemplars only reach their k nearest, cuts a large mover into
+/// side. Affinity Propagation over many samples, whose exemplars only reach their k nearest, cuts a large mover into
 /// pieces; a weakly textured one shows its motion at a few spots apart, all at one depth (the rule
 /// connected_parts applies inside a cluster), where two movers side by side are rarely at one distance.
 void merge_alike(std::vector<std::vector<uint32_t>> &clusters, const std::vector<MotionPoint> &points,
 		 const GroupParams &params)
 {
+	// Each cluster's extent, motion and depth, measured once and again only for a merged one.
+	const bool with_depth = params.member_area_px2 > 0 && params.split_same_depth > 0;
+	std::vector<cv::Rect2f> extents;
+	std::vector<cv::Point2f> motion;
+	std::vector<std::optional<float>> depth;
+	const auto measure_cluster = [&](size_t c) {
+		extents[c] = extent_of(clusters[c], points);
+		motion[c] = median_residual(clusters[c], points);
+		depth[c] = with_depth ? median_depth(clusters[c], points) : std::nullopt;
+	};
+	extents.resize(clusters.size());
+	motion.resize(clusters.size());
+	depth.resize(clusters.size());
+	for (size_t c = 0; c < clusters.size(); ++c)
+		measure_cluster(c);
+	const auto grown = [](const cv::Rect2f &r, double by) {
+		const auto g = static_cast<float>(by);
+		return cv::Rect2f(r.x - g, r.y - g, r.width + 2 * g, r.height + 2 * g);
+	};
 	bool merged = true;
 	while (merged && clusters.size() > 1) {
 		merged = false;
-		std::vector<cv::Rect2f> extents;
-		std::vector<cv::Point2f> motion;
-		std::vector<std::optional<float>> depth;
-		for (const auto &members : clusters) {
-			extents.push_back(extent_of(members, points));
-			motion.push_back(median_residual(members, points));
-			depth.push_back(params.member_area_px2 > 0 && params.split_same_depth > 0
-						? median_depth(members, points)
-						: std::nullopt);
-		}
-		const auto grown = [](const cv::Rect2f &r, double by) {
-			const auto g = static_cast<float>(by);
-			return cv::Rect2f(r.x - g, r.y - g, r.width + 2 * g, r.height + 2 * g);
-		};
 		for (size_t a = 0; a < clusters.size() && !merged; ++a)
 			for (size_t b = a + 1; b < clusters.size() && !merged; ++b) {
-				const double strength = std::max(cv::norm(motion[a]), cv::norm(motion[b]));
-				const double off = cv::norm(motion[a] - motion[b]);
-				if (off > std::max(params.label_tolerance_px, 0.5 * strength))
+				if (!move_alike(motion[a], motion[b], params))
 					continue;
 				const double touch = params.box_margin_px + 0.5 * params.merge_gap_px;
 				bool join = params.merge_gap_px >= 0 &&
@@ -267,7 +277,12 @@ void merge_alike(std::vector<std::vector<uint32_t>> &clusters, const std::vector
 				}
 				if (join) {
 					clusters[a].insert(clusters[a].end(), clusters[b].begin(), clusters[b].end());
-					clusters.erase(clusters.begin() + static_cast<std::ptrdiff_t>(b));
+					const auto at = static_cast<std::ptrdiff_t>(b);
+					clusters.erase(clusters.begin() + at);
+					extents.erase(extents.begin() + at);
+					motion.erase(motion.begin() + at);
+					depth.erase(depth.begin() + at);
+					measure_cluster(a);
 					merged = true;
 				}
 			}
@@ -406,12 +421,15 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 		double distance;
 		size_t cluster, track;
 	};
+	// Where each track's image velocity takes it since it was last seen.
+	std::vector<cv::Point2f> predicted_shift(before.size());
+	for (size_t t = 0; t < before.size(); ++t)
+		predicted_shift[t] = before[t].image_velocity_pxps * static_cast<float>(context.dt_s) *
+				     static_cast<float>(1 + before[t].missed_frames);
 	std::vector<Candidate> candidates;
 	for (size_t c = 0; c < clusters.size(); ++c)
 		for (size_t t = 0; t < before.size(); ++t) {
-			const cv::Point2f predicted =
-				before[t].centre + before[t].image_velocity_pxps * static_cast<float>(context.dt_s) *
-							   static_cast<float>(1 + before[t].missed_frames);
+			const cv::Point2f predicted = before[t].centre + predicted_shift[t];
 			const double d = cv::norm(clusters[c].centre - predicted);
 			const double gate = std::max(params.association_px,
 						     0.5 * std::hypot(before[t].box.width, before[t].box.height));
@@ -437,15 +455,11 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 		for (size_t t = 0; t < before.size(); ++t) {
 			if (track_taken[t])
 				continue;
-			const cv::Point2f shift = before[t].image_velocity_pxps * static_cast<float>(context.dt_s) *
-						  static_cast<float>(1 + before[t].missed_frames);
-			const cv::Rect2f predicted(before[t].box.tl() + shift, before[t].box.size());
+			const cv::Rect2f predicted(before[t].box.tl() + predicted_shift[t], before[t].box.size());
 			const float overlap = (predicted & clusters[c].box).area();
 			const float smaller = std::min(predicted.area(), clusters[c].box.area());
-			const cv::Point2f r = clusters[c].residual, g = before[t].residual;
-			const double strength = std::max(cv::norm(r), cv::norm(g));
 			if (smaller > 0 && overlap / smaller > best_overlap && overlap >= 0.5F * smaller &&
-			    cv::norm(r - g) <= std::max(params.label_tolerance_px, 0.5 * strength)) {
+			    move_alike(clusters[c].residual, before[t].residual, params)) {
 				best_overlap = overlap / smaller;
 				if (track_of_cluster[c] >= 0)
 					track_taken[static_cast<size_t>(track_of_cluster[c])] = 0;
@@ -499,7 +513,6 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 			published.heading_rad = std::atan2(w[0], w[2]);
 		}
 		g.published = published;
-		g.residual = cluster.residual;
 		out.memory.groups.push_back(g);
 		const int index = static_cast<int>(out.groups.size());
 		out.groups.push_back(published);
