@@ -18,7 +18,8 @@ build() { # dir, extra cmake args...
 # gives usable stacks.
 SANITIZER_FLAGS=(-DCMAKE_BUILD_TYPE=Debug "-DCMAKE_CXX_FLAGS_DEBUG=-O1 -g1")
 
-section() { printf '\n== %s ==\n' "$*"; }
+# Each heading carries the seconds since the script started, so a slow CI run shows which phase grew.
+section() { printf '\n== %s == [%d s]\n' "$*" "$SECONDS"; }
 
 case "${1:-}" in
 run)
