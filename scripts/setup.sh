@@ -52,7 +52,7 @@ test)
 	(cd build && ctest -j "$JOBS" --output-on-failure --timeout 600)
 
 	section "ASan + UBSan build: unit and integration tests"
-	build build-asan "${SANITIZER_FLAGS[@]}" -DSTEREOD_WERROR=ON -DSTEREOD_SANITIZE=address
+	build build-asan "${SANITIZER_FLAGS[@]}" -DSTEREOD_WERROR=ON -DSTEREOD_SANITIZE=address -DSTEREOD_BENCHMARKS=OFF
 	(cd build-asan && ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 \
 		ctest -j "$JOBS" --output-on-failure --timeout 900 -LE 'data|camera|slow|timing')
 
