@@ -566,6 +566,17 @@ const std::vector<Option> &options()
 			"anchored test: a track whose depth leaps faster than this between frames is anchored again; 0 "
 			"= off",
 			[](DaemonConfig &c) -> double & { return c.motion.ego.anchor_max_speed_mps; }, 0, 1000));
+		o.push_back(number(
+			"ego", "anchor_spread_px",
+			"young tracks this close (pixels) to points the anchored test found, at the same depth, are "
+			"dynamic too; 0 = off",
+			[](DaemonConfig &c) -> double & { return c.motion.ego.anchor_spread_px; }, 0, 10000));
+		o.push_back(number(
+			"ego", "anchor_spread_depth", "anchored spread: same depth within this fraction of the nearer",
+			[](DaemonConfig &c) -> double & { return c.motion.ego.anchor_spread_depth; }, 0, 10));
+		o.push_back(number(
+			"ego", "anchor_spread_min", "anchored spread: found points a young track needs beside it",
+			[](DaemonConfig &c) -> int & { return c.motion.ego.anchor_spread_min; }, 1, 100000));
 		o.push_back(boolean("ego", "depth_check", "test the depth measured at frame n (seed 001 eq. 4)",
 				    [](DaemonConfig &c) -> bool & { return c.motion.ego.depth_check; }));
 		o.push_back(boolean("ego", "along_line",

@@ -74,6 +74,13 @@ struct EgoParams {
 	/// since (plus the two depths' noise at the chi-square gate) is anchored again instead of tested: a track
 	/// passing from a mover onto the background behind it leaps by metres. 0 = no such check.
 	double anchor_max_speed_mps = 3.0;
+	/// The anchored test's finds spread to the young tracks beside them at the same depth (spread_by_depth):
+	/// within this many pixels (0 = off), this fraction of the nearer depth, from at least this many. One
+	/// find is enough: the test's finds are nearly all right (precision 0.995 on the sim's `toward`), and
+	/// what they spread to is the output's label only (docs/geometry.md has the figures for 1 and 2).
+	double anchor_spread_px = 40;
+	double anchor_spread_depth = 0.05;
+	int anchor_spread_min = 1;
 	/// Motion prior: the camera keeps its velocity within these accelerations between frames. Only points
 	/// the predicted motion explains within what the accelerations allow may vote. Without it a near,
 	/// well-textured mover can win RANSAC: far points cannot tell a turn from a sideways step, so "the

@@ -138,9 +138,13 @@ void fill_pose(EgoMotion &ego, const geometry::Pose *prev_from_curr, const geome
 void anchor_tracks(TrackSet &tracks, std::span<const Match> matches, const FrameFeatures &cur,
 		   const geometry::Pose &world_from_curr, Classification &classification,
 		   const geometry::StereoRig &rig, const MotionParams &params, const TrackSet &prev_tracks,
-		   std::vector<uint8_t> &failed)
+		   std::vector<uint8_t> &failed, std::vector<uint8_t> &spread)
 {
 	failed.resize(matches.size(), 0);
+	// Per match for the spread: the image position, the depth, found by the test, not tested this frame.
+	std::vector<cv::Point2f> px(matches.size());
+	std::vector<float> depth_m(matches.size(), std::numeric_limits<float>::quiet_NaN());
+	std::vector<uint8_t> found(matches.size(), 0), open(matches.size(), 0);
 	const double gate = chi2_quantile(1, params.ego.chi2_quantile);
 	const AnchorParams anchor{params.ego.anchor_min_frames, params.ego.anchor_max_frames,
 				  params.ego.anchor_max_speed_mps, gate};
@@ -157,14 +161,23 @@ void anchor_tracks(TrackSet &tracks, std::span<const Match> matches, const Frame
 		const double statistic =
 			advance_anchor(tracks.by_keypoint[c], depth, classification.labels[i] != PointLabel::Dynamic,
 				       tracks.t_ns, world_from_curr, anchor);
+		px[i] = cur.keypoints[c].pt;
+		if (depth)
+			depth_m[i] = xyz[2];
+		open[i] = std::isnan(statistic) && classification.labels[i] != PointLabel::Dynamic ? 1 : 0;
 		if (!(statistic > gate) || (have_texture && classification.texture_agrees[i] == 0))
 			continue;
 		// Like the per-frame test, confirmed by a failure in the frame before (ego.confirm_frames).
 		failed[i] = 1;
 		if (params.ego.confirm_frames <= 1 ||
-		    flagged_before(&prev_tracks, static_cast<size_t>(matches[i].prev)))
+		    flagged_before(&prev_tracks, static_cast<size_t>(matches[i].prev))) {
 			classification.labels[i] = PointLabel::Dynamic;
+			found[i] = 1;
+		}
 	}
+	spread = spread_by_depth(
+		px, depth_m, found, open,
+		{params.ego.anchor_spread_px, params.ego.anchor_spread_depth, params.ego.anchor_spread_min});
 }
 
 } // namespace
@@ -433,9 +446,12 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 	const bool moved = pose && pose->valid;
 	const geometry::Pose prev_from_curr = moved ? pose->curr_from_prev.inverse() : geometry::Pose{};
 	const geometry::Pose world_from_curr = world_prev * prev_from_curr;
+	// Per match: made dynamic by the anchored test's finds beside it (for the output only, like a group's
+	// label: a wrong spread cannot feed back into the pose or keep a track from being anchored).
+	std::vector<uint8_t> spread;
 	if (moved && params.ego.anchor_min_frames > 0 && params.label_method != LabelMethod::Seed000)
 		anchor_tracks(tracks, matches, cur, world_from_curr, classification, *params.rig, params, *prev_tracks,
-			      failed);
+			      failed, spread);
 	tracks.residual_by_keypoint.assign(cur.keypoints.size(), cv::Point2f(kNaN, kNaN));
 	for (size_t i = 0; i < n; ++i)
 		tracks.residual_by_keypoint[static_cast<size_t>(matches[i].cur)] =
@@ -549,6 +565,8 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 		// A group's label is for the output only: it does not keep points from voting for the next pose or
 		// confirm them, so a group that wrongly covers static points cannot feed back into the pose.
 		if (params.groups.label_points && i < group_of_point.size() && group_of_point[i] >= 0)
+			point.label = PointLabel::Dynamic;
+		if (i < spread.size() && spread[i] != 0)
 			point.label = PointLabel::Dynamic;
 		const auto c = static_cast<size_t>(matches[i].cur);
 		point.track = tracks.by_keypoint[c].id;

@@ -180,4 +180,36 @@ double advance_anchor(TrackState &state, const std::optional<DepthSample> &depth
 					static_cast<float>(depth->xyz_camera[2]), depth->sigma_m);
 }
 
+std::vector<uint8_t> spread_by_depth(std::span<const cv::Point2f> px, std::span<const float> depth_m,
+				     std::span<const uint8_t> found, std::span<const uint8_t> open,
+				     const DepthSpreadParams &params)
+{
+	const size_t n = std::min({px.size(), depth_m.size(), found.size(), open.size()});
+	std::vector<uint8_t> spread(px.size(), 0);
+	if (params.radius_px <= 0 || params.min_neighbours <= 0)
+		return spread;
+	std::vector<size_t> sources; // few: the points the test failed this frame
+	for (size_t i = 0; i < n; ++i)
+		if (found[i] != 0 && std::isfinite(depth_m[i]) && depth_m[i] > 0)
+			sources.push_back(i);
+	if (sources.size() < static_cast<size_t>(params.min_neighbours))
+		return spread;
+	const double radius2 = params.radius_px * params.radius_px;
+	for (size_t i = 0; i < n; ++i) {
+		if (open[i] == 0 || found[i] != 0 || !std::isfinite(depth_m[i]) || depth_m[i] <= 0)
+			continue;
+		int near = 0;
+		for (const size_t s : sources) {
+			const cv::Point2f d = px[i] - px[s];
+			if (static_cast<double>(d.x) * d.x + static_cast<double>(d.y) * d.y > radius2 ||
+			    std::abs(depth_m[i] - depth_m[s]) > params.depth_ratio * std::min(depth_m[i], depth_m[s]))
+				continue;
+			if (++near >= params.min_neighbours)
+				break;
+		}
+		spread[i] = near >= params.min_neighbours ? 1 : 0;
+	}
+	return spread;
+}
+
 } // namespace stereod::vision

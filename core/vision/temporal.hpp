@@ -144,6 +144,23 @@ struct DepthSample {
 double advance_anchor(TrackState &state, const std::optional<DepthSample> &depth, bool may_start, int64_t t_ns,
 		      const geometry::Pose &world_from_camera, const AnchorParams &params);
 
+/// Spreading the anchored depth test's finds (ego.anchor_spread_*, docs/geometry.md).
+struct DepthSpreadParams {
+	double radius_px = 40;	   ///< a point's neighbours are this close in the image; 0 = off
+	double depth_ratio = 0.05; ///< and this close in depth, relative to the nearer
+	int min_neighbours = 1;	   ///< found neighbours a point needs to become dynamic
+};
+
+/// The anchored depth test can only judge a track once it has lived `min_frames`, and the corners on a
+/// walker heading at the camera rarely live that long: the walker grows in the image and its corners change.
+/// What the test finds on the walker's older tracks speaks for the young ones beside it at the same depth:
+/// a point that is `open` (its own track not yet tested) and has depth becomes dynamic when at least
+/// `min_neighbours` of the `found` points lie within `radius_px` in the image and within `depth_ratio` of the
+/// nearer depth. `px`, `depth_m` (NaN: none), `found` and `open` are per point; returns a flag per point.
+std::vector<uint8_t> spread_by_depth(std::span<const cv::Point2f> px, std::span<const float> depth_m,
+				     std::span<const uint8_t> found, std::span<const uint8_t> open,
+				     const DepthSpreadParams &params);
+
 /// Relabels as dynamic every matched point whose memory says it moves (labels[i] belongs to matches[i]);
 /// returns how many changed. Labels the seed already made dynamic stay dynamic. `looser` (per match, may be
 /// empty) marks points whose `static` label the memory may overturn at the lower gate `looser_chi2` too: the

@@ -477,6 +477,29 @@ TEST(Geometry, ADepthLeapStartsTheAnchorAgain)
 	EXPECT_FALSE(std::isnan(anchor_statistics(walker, 0.05, 0, AnchorParams{})[11]));
 }
 
+TEST(Geometry, AnchoredFindsSpreadToYoungTracksAtTheSameDepth)
+{
+	// Two points the test found on a walker at 5 m; beside them young tracks: one at 5.1 m 20 px away (both
+	// found within 40 px and 5 %: dynamic), one at 5.6 m (the ground behind: 10 % deeper, stays), one at 5 m
+	// 30 px from the second find but 51 px from the first (one within reach: stays), one at 5 m with its own track
+	// already tested (not open: stays), one without depth (stays).
+	const std::vector<cv::Point2f> px = {{100, 100}, {120, 110}, {110, 120}, {115, 125},
+					     {150, 110}, {105, 105}, {112, 108}};
+	const float none = std::numeric_limits<float>::quiet_NaN();
+	const std::vector<float> depth = {5.0F, 5.0F, 5.1F, 5.6F, 5.0F, 5.0F, none};
+	const std::vector<uint8_t> found = {1, 1, 0, 0, 0, 0, 0};
+	const std::vector<uint8_t> open = {0, 0, 1, 1, 1, 0, 1};
+	const DepthSpreadParams params{40, 0.05, 2};
+	EXPECT_EQ(spread_by_depth(px, depth, found, open, params), (std::vector<uint8_t>{0, 0, 1, 0, 0, 0, 0}));
+	// One find is not enough for two; it is for one. Off with a zero radius.
+	const std::vector<uint8_t> one_found = {1, 0, 0, 0, 0, 0, 0};
+	EXPECT_EQ(spread_by_depth(px, depth, one_found, open, params), std::vector<uint8_t>(7, 0));
+	const std::vector<uint8_t> all_young = {0, 1, 1, 1, 1, 0, 1};
+	EXPECT_EQ(spread_by_depth(px, depth, one_found, all_young, DepthSpreadParams{40, 0.05, 1}),
+		  (std::vector<uint8_t>{0, 1, 1, 0, 0, 0, 0}));
+	EXPECT_EQ(spread_by_depth(px, depth, found, open, DepthSpreadParams{0, 0.05, 2}), std::vector<uint8_t>(7, 0));
+}
+
 TEST(Geometry, AnchoredDepthByHand)
 {
 	// A point anchored 6 m ahead (sigma 0.1 m); the camera walked 0.5 m forward since: a static point is now
