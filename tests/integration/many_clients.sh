@@ -13,11 +13,17 @@ PIDS+=($DAEMON)
 for _ in $(seq 100); do [ -S "$SOCK" ] && break; sleep 0.1; done
 [ -S "$SOCK" ] || fail "no socket after 10 s: $(cat "$WORK/daemon.log")"
 last_status() { grep '"type":"status"' "$1" | tail -1; }
+# The publish rate over all the statuses a client got (frames published between the first and the last, over
+# the host time between them): a status's own fps covers one second and swings by 10 % on a loaded machine.
+mean_rate() {
+	grep '"type":"status"' "$1" | jq -s 'if length < 2 then empty else
+		(.[-1].frames.published - .[0].frames.published) / ((.[-1].t_host_ns - .[0].t_host_ns) / 1e9) end'
+}
 
 # The frame rate with one client.
-timeout 5 socat -u UNIX-CONNECT:"$SOCK" - >"$WORK/alone.ndjson" || true
-alone_fps=$(last_status "$WORK/alone.ndjson" | jq '.fps.publish')
-[ -n "$alone_fps" ] || fail "no status with one client"
+timeout 6 socat -u UNIX-CONNECT:"$SOCK" - >"$WORK/alone.ndjson" || true
+alone_fps=$(mean_rate "$WORK/alone.ndjson")
+[ -n "$alone_fps" ] || fail "fewer than two statuses with one client"
 
 # 66 clients reading everything, 34 that connect and never read (socat hands the stream to `sleep`, which
 # never reads its input: once the pipe and the socket buffers fill, the daemon sees a client that is stuck).
@@ -39,12 +45,12 @@ sleep 12
 status=$(last_status "$WORK/reader1.ndjson")
 [ -n "$status" ] || fail "reader 1 got no status"
 clients=$(echo "$status" | jq '.clients')
-fps=$(echo "$status" | jq '.fps.publish')
+fps=$(mean_rate "$WORK/reader1.ndjson")
 ring=$(echo "$status" | jq '.drops.ring_overflow')
 queue=$(echo "$status" | jq '.drops.client_queue')
 p99=$(echo "$status" | jq '.latency_ms.capture_to_publish.p99')
 [ "$clients" -ge $((READERS + SILENT)) ] || fail "status says $clients clients, want $((READERS + SILENT))"
-# The pipeline kept its rate: within 20 % of the rate with one client.
+# The pipeline kept its rate: within 20 % of the rate with one client, both over several seconds.
 awk -v a="$fps" -v b="$alone_fps" 'BEGIN { exit !(a >= 0.8 * b) }' || fail "publish rate $fps fps with 100 clients, $alone_fps alone"
 [ "$queue" -gt 0 ] || fail "the silent clients' queues never overflowed (client_queue = 0): were they reading?"
 # What the readers have now (they keep writing: each is read up to its size at this moment).
