@@ -149,6 +149,7 @@ void anchor_tracks(TrackSet &tracks, std::span<const Match> matches, const Frame
 	const AnchorParams anchor{params.ego.anchor_min_frames, params.ego.anchor_max_frames,
 				  params.ego.anchor_max_speed_mps, gate};
 	const bool have_texture = classification.texture_agrees.size() == matches.size();
+	const CameraInWorld camera(world_from_curr);
 	for (size_t i = 0; i < matches.size(); ++i) {
 		const auto c = static_cast<size_t>(matches[i].cur);
 		if (c >= tracks.by_keypoint.size() || c >= cur.xyz.size())
@@ -160,7 +161,7 @@ void anchor_tracks(TrackSet &tracks, std::span<const Match> matches, const Frame
 					    rig.depth_sigma(xyz[2], params.stereo.disparity_sigma_px)};
 		const double statistic =
 			advance_anchor(tracks.by_keypoint[c], depth, classification.labels[i] != PointLabel::Dynamic,
-				       tracks.t_ns, world_from_curr, anchor);
+				       tracks.t_ns, camera, anchor);
 		px[i] = cur.keypoints[c].pt;
 		if (depth)
 			depth_m[i] = xyz[2];

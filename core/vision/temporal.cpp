@@ -123,10 +123,11 @@ int promote_remembered_movers(std::span<PointLabel> labels, std::span<const Matc
 }
 
 double advance_anchor(TrackState &state, const std::optional<DepthSample> &depth, bool may_start, int64_t t_ns,
-		      const geometry::Pose &world_from_camera, const AnchorParams &params)
+		      const CameraInWorld &camera, const AnchorParams &params)
 {
 	constexpr double kNone = std::numeric_limits<double>::quiet_NaN();
-	const geometry::Pose camera_from_world = world_from_camera.inverse();
+	const geometry::Pose &world_from_camera = camera.world_from_camera;
+	const geometry::Pose &camera_from_world = camera.camera_from_world;
 	bool anchored = std::isfinite(state.anchor_world[0]);
 	std::optional<cv::Vec3d> world;
 	if (depth) {

@@ -128,6 +128,16 @@ struct AnchorParams {
 	double gate = 6.63;	    ///< chi-square (1 dof) for the leap
 };
 
+/// The frame's camera in the world both ways, inverted once per frame rather than once per point.
+struct CameraInWorld {
+	explicit CameraInWorld(const geometry::Pose &world_from_camera_)
+		: world_from_camera(world_from_camera_), camera_from_world(world_from_camera_.inverse())
+	{
+	}
+	geometry::Pose world_from_camera;
+	geometry::Pose camera_from_world;
+};
+
 /// A depth measured on a track in this frame: the point in the camera and its depth's standard deviation.
 struct DepthSample {
 	cv::Vec3d xyz_camera;
@@ -142,7 +152,7 @@ struct DepthSample {
 /// mover onto the background behind it. Returns the statistic (anchored_depth_statistic) when the test runs
 /// in this frame, NaN otherwise.
 double advance_anchor(TrackState &state, const std::optional<DepthSample> &depth, bool may_start, int64_t t_ns,
-		      const geometry::Pose &world_from_camera, const AnchorParams &params);
+		      const CameraInWorld &camera, const AnchorParams &params);
 
 /// Spreading the anchored depth test's finds (ego.anchor_spread_*, docs/geometry.md).
 struct DepthSpreadParams {

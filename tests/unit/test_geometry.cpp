@@ -416,7 +416,7 @@ std::vector<double> anchor_statistics(const std::vector<double> &depths, double 
 		if (depths[n] > 0)
 			depth = DepthSample{cv::Vec3d(0.5, 0.2, depths[n]), sigma_m};
 		out.push_back(advance_anchor(state, depth, true, static_cast<int64_t>(n) * 33'333'333,
-					     world_from_camera, params));
+					     CameraInWorld(world_from_camera), params));
 	}
 	return out;
 }
