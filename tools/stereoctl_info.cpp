@@ -14,12 +14,17 @@
 namespace stereod::tools {
 namespace {
 
+/// A recording's frames as both formats' reports name them: "640x480 bgr8 stereo +depth".
+std::string geometry_text(const FrameGeometry &g)
+{
+	return std::to_string(g.width) + "x" + std::to_string(g.height) + " " + std::string(to_string(g.format)) +
+	       (g.stereo ? " stereo" : " mono") + (g.depth ? " +depth" : "") + (g.truth ? " +truth" : "");
+}
+
 void print_header(const std::string &path, const drivers::RecordingHeader &h)
 {
 	std::cout << path << ": recorded from " << h.source << " (" << h.description << ")\n"
-		  << "  " << h.geometry.width << "x" << h.geometry.height << " " << to_string(h.geometry.format)
-		  << (h.geometry.stereo ? " stereo" : " mono") << (h.geometry.depth ? " +depth" : "")
-		  << (h.geometry.truth ? " +truth" : "") << ", nominal " << h.geometry.nominal_fps << " fps\n";
+		  << "  " << geometry_text(h.geometry) << ", nominal " << h.geometry.nominal_fps << " fps\n";
 }
 
 int info_srec(const std::string &path)
@@ -54,9 +59,7 @@ int info_mcap(const std::string &path)
 		try {
 			const auto h = drivers::parse_recording_header(header->second);
 			std::cout << "  recorded from " << h.source << " (" << h.description << "), "
-				  << h.geometry.width << "x" << h.geometry.height << " " << to_string(h.geometry.format)
-				  << (h.geometry.stereo ? " stereo" : " mono") << (h.geometry.depth ? " +depth" : "")
-				  << (h.geometry.truth ? " +truth" : "") << "\n";
+				  << geometry_text(h.geometry) << "\n";
 		} catch (const std::exception &e) {
 			std::cout << "  channel " << channel.topic << ": bad recording header: " << e.what() << "\n";
 		}
