@@ -652,6 +652,9 @@ const std::vector<Option> &options()
 			"groups", "depth_radius_cells",
 			"lk / dis: a cell's depth is the median of the stereo points within this many cells",
 			[](DaemonConfig &c) -> int & { return c.motion.dense.depth_radius_cells; }, 0, 32));
+		o.push_back(boolean("groups", "label_cells",
+				    "lk / dis: a point on a cell a group holds is labelled dynamic with it",
+				    [](DaemonConfig &c) -> bool & { return c.motion.dense.label_cells; }));
 		o.push_back(number(
 			"groups", "min_flow_px",
 			"shortest residual flow (pixels per frame) that counts as strong motion",
@@ -735,6 +738,10 @@ const std::vector<Option> &options()
 			"groups", "label_tolerance_px",
 			"labels: residual difference to the group's still counted as moving with it",
 			[](DaemonConfig &c) -> double & { return c.motion.groups.label_tolerance_px; }, 0, 1000));
+		o.push_back(number(
+			"groups", "member_tolerance_px",
+			"groups: residual difference to a cluster's for a member, or between clusters that move alike",
+			[](DaemonConfig &c) -> double & { return c.motion.groups.member_tolerance_px; }, 0, 1000));
 
 		// [prior]: seed 001's person prior (core/vision/person_prior.hpp)
 		o.push_back(boolean("prior", "enabled",

@@ -215,6 +215,25 @@ std::vector<MotionPoint> cell_motion(const CellFlow &cells, const DenseFlowParam
 	return points;
 }
 
+void join_by_cells(std::span<const MotionPoint> points, std::span<const int> group_of_cell, int cols, int rows,
+		   int step_px, double still_px, std::vector<int> &group_of_point)
+{
+	const int step = std::max(step_px, 1);
+	for (size_t i = 0; i < points.size() && i < group_of_point.size(); ++i) {
+		if (group_of_point[i] >= 0 || !(cv::norm(points[i].residual) >= still_px)) // NaN: no residual
+			continue;
+		const cv::Point2f before = points[i].px - points[i].flow;
+		if (!(before.x >= 0 && before.y >= 0)) // also NaN
+			continue;
+		const int c = static_cast<int>(before.x) / step, r = static_cast<int>(before.y) / step;
+		if (c >= cols || r >= rows)
+			continue;
+		const auto cell = static_cast<size_t>(r) * static_cast<size_t>(cols) + static_cast<size_t>(c);
+		if (cell < group_of_cell.size())
+			group_of_point[i] = group_of_cell[cell];
+	}
+}
+
 std::vector<uint32_t> supported_cells(std::span<const uint32_t> strong, int cols, int rows, int min_neighbours)
 {
 	if (min_neighbours <= 0 || cols <= 0 || rows <= 0)

@@ -47,6 +47,9 @@ struct DenseFlowParams {
 	int min_cells = 12;
 	/// Depth of a cell from the stereo points within this many cells of it (their median); none beyond.
 	int depth_radius_cells = 2;
+	/// Labels: a feature point on a cell a group holds joins the group (join_by_cells), whatever its own
+	/// residual says, unless that residual stands still (join_by_cells).
+	bool label_cells = true;
 };
 
 /// The image the dense flow runs on: the grey left image scaled by params.scale.
@@ -82,6 +85,17 @@ struct StaticSceneModel {
 std::vector<MotionPoint> cell_motion(const CellFlow &cells, const DenseFlowParams &params,
 				     std::span<const float> prev_depth, std::span<const float> cur_depth,
 				     const StaticSceneModel &model);
+
+/// Feature points join the group that holds the cell under them (group_of_point, one entry per point; points
+/// already in a group keep theirs). `group_of_cell` is find_groups' group_of_point over cell_motion's cells;
+/// the cell under a point is the one its previous position (px - flow) falls in, as the cells are the previous
+/// frame's grid. For slow movers a point's own residual is a noisier measure of its motion than the cell's
+/// windowed flow, and the cells a group holds already passed its motion rule. A point whose own residual is
+/// shorter than `still_px` stands still by its own measure and does not join (a background point beside a
+/// mover's edge, onto which the window smears the mover's flow), nor does one without a residual (a point
+/// without depth under a moving camera: nothing says it moves).
+void join_by_cells(std::span<const MotionPoint> points, std::span<const int> group_of_cell, int cols, int rows,
+		   int step_px, double still_px, std::vector<int> &group_of_point);
 
 /// The strong cells with at least `min_neighbours` strong cells among their 8 neighbours.
 std::vector<uint32_t> supported_cells(std::span<const uint32_t> strong, int cols, int rows, int min_neighbours);

@@ -127,12 +127,13 @@ TargetGroup coasted(const TrackedGroup &track, double dt_s)
 	return g;
 }
 
-/// The rule a point's residual r moves with a group's g by (join_groups): |r - g| <= max(tolerance, |g| / 2)
+/// The rule a point's residual r moves with a group's g by (join_groups, with label_tolerance_px; a cluster's
+/// members, with member_tolerance_px): |r - g| <= max(tolerance, |g| / 2)
 /// and |r - g| < |r|, nearer the group's motion than standing still. NaN residuals never do.
-bool moves_with(cv::Point2f r, cv::Point2f g, const GroupParams &params)
+bool moves_with(cv::Point2f r, cv::Point2f g, double tolerance_px)
 {
 	const double off = cv::norm(r - g);
-	return off <= std::max(params.label_tolerance_px, 0.5 * cv::norm(g)) && off < cv::norm(r);
+	return off <= std::max(tolerance_px, 0.5 * cv::norm(g)) && off < cv::norm(r);
 }
 
 /// The rule two motions a and b (clusters' or tracks' median residuals) are alike by: |a - b| <=
@@ -140,7 +141,7 @@ bool moves_with(cv::Point2f r, cv::Point2f g, const GroupParams &params)
 bool move_alike(cv::Point2f a, cv::Point2f b, const GroupParams &params)
 {
 	const double strength = std::max(cv::norm(a), cv::norm(b));
-	return cv::norm(a - b) <= std::max(params.label_tolerance_px, 0.5 * strength);
+	return cv::norm(a - b) <= std::max(params.member_tolerance_px, 0.5 * strength);
 }
 
 cv::Point2f median_residual(const std::vector<uint32_t> &members, const std::vector<MotionPoint> &points)
@@ -335,7 +336,7 @@ void join_groups(const std::vector<MotionPoint> &points, const GroupOutput &foun
 		for (size_t i = 0; i < points.size() && i < group_of_point.size(); ++i) {
 			const MotionPoint &p = points[i];
 			if (group_of_point[i] < 0 && p.px.x >= b[0] && p.px.x <= b[2] && p.px.y >= b[1] &&
-			    p.px.y <= b[3] && moves_with(p.residual, group_residual, params))
+			    p.px.y <= b[3] && moves_with(p.residual, group_residual, params.label_tolerance_px))
 				group_of_point[i] = static_cast<int>(g);
 		}
 	}
@@ -389,8 +390,9 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 			// around a mover, a stray point the clustering took along) leave it, by the rule points join
 			// a group by (join_groups), so that the box and the velocities are the movers'.
 			const cv::Point2f median = median_residual(members, points);
-			std::erase_if(members,
-				      [&](uint32_t i) { return !moves_with(points[i].residual, median, params); });
+			std::erase_if(members, [&](uint32_t i) {
+				return !moves_with(points[i].residual, median, params.member_tolerance_px);
+			});
 			if (params.member_area_px2 > 0 && params.split_gap_cells >= 0) {
 				for (auto &part : connected_parts(members, points, std::sqrt(params.member_area_px2),
 								  params.split_gap_cells, params.split_same_depth))

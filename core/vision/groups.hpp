@@ -53,9 +53,15 @@ struct GroupParams {
 	int coast_frames = 2;
 	double smoothing = 0.5; ///< weight of the new measurement in the velocity averages
 	/// Labels: a point inside a published group's box whose residual agrees with the group's (within the
-	/// larger of this and half the group's residual) becomes dynamic.
+	/// larger of this and half the group's residual) becomes dynamic. 2 px: a keypoint's position is
+	/// quantised to its pyramid level, so a slow walker's own residual is off the group's by a pixel or two
+	/// (docs/groups.md, measured on vtest).
 	bool label_points = true;
-	double label_tolerance_px = 1.0;
+	double label_tolerance_px = 2.0;
+	/// The same rule for the groups themselves: which members move like their cluster's median, and which
+	/// clusters and tracks move alike. Tighter than the labels' (at 2 px patches of flow noise under pure
+	/// rotation join into groups).
+	double member_tolerance_px = 1.0;
 	/// Added around the members' extent to make a group's box (the pipeline's: half a cell when the members
 	/// are the dense flow's grid cells, whose positions are the cells' centres).
 	double box_margin_px = 0;

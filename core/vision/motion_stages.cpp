@@ -134,17 +134,22 @@ void fill_pose(EgoMotion &ego, const geometry::Pose *prev_from_curr, const geome
 
 /// The anchored depth test (docs/geometry.md): each followed point's depth against its track's first
 /// measured position carried by the camera's motion since; points that drifted are dynamic. New tracks, and
-/// old anchors, are (re-)anchored from this frame's depth.
-void anchor_tracks(TrackSet &tracks, std::span<const Match> matches, const FrameFeatures &cur,
-		   const geometry::Pose &world_from_curr, Classification &classification,
-		   const geometry::StereoRig &rig, const MotionParams &params, const TrackSet &prev_tracks,
-		   std::vector<uint8_t> &failed, std::vector<uint8_t> &spread)
+/// old anchors, are (re-)anchored from this frame's depth. Marks the points that failed in `failed` (which
+/// the per-frame test has filled before) and returns, per match, those the finds spread to (empty when
+/// `ego.anchor_spread_px` is 0).
+std::vector<uint8_t> anchor_tracks(TrackSet &tracks, std::span<const Match> matches, const FrameFeatures &cur,
+				   const geometry::Pose &world_from_curr, Classification &classification,
+				   const geometry::StereoRig &rig, const MotionParams &params,
+				   const TrackSet &prev_tracks, std::vector<uint8_t> &failed)
 {
 	failed.resize(matches.size(), 0);
-	// Per match for the spread: the image position, the depth, found by the test, not tested this frame.
-	std::vector<cv::Point2f> px(matches.size());
-	std::vector<float> depth_m(matches.size(), std::numeric_limits<float>::quiet_NaN());
-	std::vector<uint8_t> found(matches.size(), 0), open(matches.size(), 0);
+	// Per match for the spread, kept only when it is on: the image position, the depth, found by the test,
+	// not tested this frame.
+	const bool spreading = params.ego.anchor_spread_px > 0;
+	const size_t kept = spreading ? matches.size() : 0;
+	std::vector<cv::Point2f> px(kept);
+	std::vector<float> depth_m(kept, std::numeric_limits<float>::quiet_NaN());
+	std::vector<uint8_t> found(kept, 0), open(kept, 0);
 	const double gate = chi2_quantile(1, params.ego.chi2_quantile);
 	const AnchorParams anchor{params.ego.anchor_min_frames, params.ego.anchor_max_frames,
 				  params.ego.anchor_max_speed_mps, gate};
@@ -162,10 +167,12 @@ void anchor_tracks(TrackSet &tracks, std::span<const Match> matches, const Frame
 		const double statistic =
 			advance_anchor(tracks.by_keypoint[c], depth, classification.labels[i] != PointLabel::Dynamic,
 				       tracks.t_ns, camera, anchor);
-		px[i] = cur.keypoints[c].pt;
-		if (depth)
-			depth_m[i] = xyz[2];
-		open[i] = std::isnan(statistic) && classification.labels[i] != PointLabel::Dynamic ? 1 : 0;
+		if (spreading) {
+			px[i] = cur.keypoints[c].pt;
+			if (depth)
+				depth_m[i] = xyz[2];
+			open[i] = std::isnan(statistic) && classification.labels[i] != PointLabel::Dynamic ? 1 : 0;
+		}
 		if (!(statistic > gate) || (have_texture && classification.texture_agrees[i] == 0))
 			continue;
 		// Like the per-frame test, confirmed by a failure in the frame before (ego.confirm_frames).
@@ -173,10 +180,13 @@ void anchor_tracks(TrackSet &tracks, std::span<const Match> matches, const Frame
 		if (params.ego.confirm_frames <= 1 ||
 		    flagged_before(&prev_tracks, static_cast<size_t>(matches[i].prev))) {
 			classification.labels[i] = PointLabel::Dynamic;
-			found[i] = 1;
+			if (spreading)
+				found[i] = 1;
 		}
 	}
-	spread = spread_by_depth(
+	if (!spreading)
+		return {};
+	return spread_by_depth(
 		px, depth_m, found, open,
 		{params.ego.anchor_spread_px, params.ego.anchor_spread_depth, params.ego.anchor_spread_min});
 }
@@ -451,8 +461,8 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 	// label: a wrong spread cannot feed back into the pose or keep a track from being anchored).
 	std::vector<uint8_t> spread;
 	if (moved && params.ego.anchor_min_frames > 0 && params.label_method != LabelMethod::Seed000)
-		anchor_tracks(tracks, matches, cur, world_from_curr, classification, *params.rig, params, *prev_tracks,
-			      failed, spread);
+		spread = anchor_tracks(tracks, matches, cur, world_from_curr, classification, *params.rig, params,
+				       *prev_tracks, failed);
 	tracks.residual_by_keypoint.assign(cur.keypoints.size(), cv::Point2f(kNaN, kNaN));
 	for (size_t i = 0; i < n; ++i)
 		tracks.residual_by_keypoint[static_cast<size_t>(matches[i].cur)] =
@@ -526,8 +536,12 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 				supported_cells(strong_motion(cell_points, group_params), cells->cols, cells->rows,
 						params.dense.min_strong_neighbours);
 			found = find_groups(cell_points, memory, context, group_params, workspace, &strong);
+			const std::vector<int> group_of_cell = std::move(found.group_of_point);
 			found.group_of_point.assign(n, -1);
 			join_groups(motion, found, group_params, found.group_of_point);
+			if (params.dense.label_cells)
+				join_by_cells(motion, group_of_cell, cells->cols, cells->rows, params.dense.step_px,
+					      0.5 * group_params.min_flow_px, found.group_of_point);
 		} else {
 			found = find_groups(motion, memory, context, group_params, workspace);
 		}
@@ -563,11 +577,11 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 		point.prev_u = pairs[i].prev.x;
 		point.prev_v = pairs[i].prev.y;
 		point.label = classification.labels[i];
-		// A group's label is for the output only: it does not keep points from voting for the next pose or
-		// confirm them, so a group that wrongly covers static points cannot feed back into the pose.
-		if (params.groups.label_points && i < group_of_point.size() && group_of_point[i] >= 0)
-			point.label = PointLabel::Dynamic;
-		if (i < spread.size() && spread[i] != 0)
+		// A group's label and the anchored test's spread are for the output only: they do not keep points
+		// from voting for the next pose or confirm them, so a group or a spread that wrongly covers static
+		// points cannot feed back into the pose.
+		const bool in_group = params.groups.label_points && i < group_of_point.size() && group_of_point[i] >= 0;
+		if (in_group || (i < spread.size() && spread[i] != 0))
 			point.label = PointLabel::Dynamic;
 		const auto c = static_cast<size_t>(matches[i].cur);
 		point.track = tracks.by_keypoint[c].id;

@@ -356,6 +356,41 @@ TEST(DenseFlow, LoneStrongCellsAreDropped)
 	EXPECT_EQ(supported_cells(strong, 10, 10, 0).size(), 10u);
 }
 
+TEST(DenseFlow, PointsJoinTheGroupHoldingTheCellUnderThem)
+{
+	// A 4x3 grid of 8 px cells; group 0 holds cells (1, 1) and (2, 1), group 1 holds (3, 2). Points are looked
+	// up by their previous position (px - flow): the cells are the previous frame's grid.
+	std::vector<int> group_of_cell(12, -1);
+	group_of_cell[1 * 4 + 1] = 0;
+	group_of_cell[1 * 4 + 2] = 0;
+	group_of_cell[2 * 4 + 3] = 1;
+	auto point = [](cv::Point2f before, cv::Point2f residual) {
+		MotionPoint m;
+		m.flow = {3, 0};
+		m.px = before + m.flow;
+		m.residual = residual;
+		return m;
+	};
+	const cv::Point2f moving(1.5F, 0.F);
+	const std::vector<MotionPoint> points = {
+		point({10, 10}, moving),       // cell (1, 1): group 0
+		point({6, 10}, moving),	       // now at (9, 10), in cell (1, 1), but was in (0, 1): none
+		point({20, 12}, {0.2F, 0.1F}), // cell (2, 1), but stands still by its own measure
+		point({20, 12}, {NAN, NAN}),   // cell (2, 1), no residual of its own
+		point({28, 20}, {-2.F, 1.F}),  // cell (3, 2): group 1, whatever the direction
+		point({12, 12}, moving),       // cell (1, 1), already in group 1: keeps it
+		point({40, 10}, moving),       // beyond the grid
+	};
+	std::vector<int> group_of_point(points.size(), -1);
+	group_of_point[5] = 1;
+	join_by_cells(points, group_of_cell, 4, 3, 8, 0.5, group_of_point);
+	EXPECT_EQ(group_of_point, (std::vector<int>{0, -1, -1, -1, 1, 1, -1}));
+	// With no still floor the slow point joins; the one without a residual never does.
+	std::fill(group_of_point.begin(), group_of_point.end(), -1);
+	join_by_cells(points, group_of_cell, 4, 3, 8, 0.0, group_of_point);
+	EXPECT_EQ(group_of_point, (std::vector<int>{0, -1, 0, -1, 1, 0, -1}));
+}
+
 TEST(Groups, PointsJoinOnlyWhenNearerTheGroupsMotionThanStill)
 {
 	// One group in box [0, 100]^2 moving (4, 0) px per frame. Inside: a point moving (3.5, 0.5) joins; one
