@@ -520,6 +520,10 @@ const std::vector<Option> &options()
 			"ego", "ransac_confidence",
 			"stop sampling once an all-inlier sample was drawn with this probability (0: draw them all)",
 			[](DaemonConfig &c) -> double & { return c.motion.ego.ransac_confidence; }, 0, 0.999999));
+		o.push_back(boolean(
+			"ego", "ransac_spread_score",
+			"RANSAC prefers the pose whose inliers spread over more of the image, then more inliers",
+			[](DaemonConfig &c) -> bool & { return c.motion.ego.ransac_spread_score; }));
 		o.push_back(number(
 			"ego", "max_depth_m", "farther points do not vote for the pose",
 			[](DaemonConfig &c) -> double & { return c.motion.ego.max_depth_m; }, 0.1, 100000));

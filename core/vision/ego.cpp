@@ -40,14 +40,35 @@ double error2(const std::vector<cv::Point3f> &object, const std::vector<cv::Poin
 	return dx * dx + dy * dy;
 }
 
-/// How many points `pose` explains: RANSAC's score, counted without building the list.
-size_t count_inliers(const std::vector<cv::Point3f> &object, const std::vector<cv::Point2f> &image,
-		     const geometry::StereoRig &rig, const geometry::Pose &pose, double threshold_px)
+/// RANSAC's score of a hypothesis: how many points it explains and over how many cells of a coarse image
+/// grid they spread. Counted without building the list.
+struct Support {
+	size_t points = 0;
+	size_t cells = 0;
+};
+
+/// The coarse grid the support's spread is counted on: kSupportCols x kSupportRows cells over the image
+/// (twice the principal point).
+constexpr int kSupportCols = 16, kSupportRows = 12;
+
+Support count_inliers(const std::vector<cv::Point3f> &object, const std::vector<cv::Point2f> &image,
+		      const geometry::StereoRig &rig, const geometry::Pose &pose, double threshold_px)
 {
-	size_t count = 0;
-	for (size_t i = 0; i < object.size(); ++i)
-		count += error2(object, image, i, rig, pose) <= threshold_px * threshold_px ? 1 : 0;
-	return count;
+	Support support;
+	std::array<uint8_t, kSupportCols * kSupportRows> occupied{};
+	const double cell_w = std::max(2 * rig.cx / kSupportCols, 1.0),
+		     cell_h = std::max(2 * rig.cy / kSupportRows, 1.0);
+	for (size_t i = 0; i < object.size(); ++i) {
+		if (!(error2(object, image, i, rig, pose) <= threshold_px * threshold_px))
+			continue;
+		++support.points;
+		const int c = std::clamp(static_cast<int>(image[i].x / cell_w), 0, kSupportCols - 1);
+		const int r = std::clamp(static_cast<int>(image[i].y / cell_h), 0, kSupportRows - 1);
+		uint8_t &cell = occupied[static_cast<size_t>(r * kSupportCols + c)];
+		support.cells += cell == 0 ? 1 : 0;
+		cell = 1;
+	}
+	return support;
 }
 
 std::vector<int> inliers_of(const std::vector<cv::Point3f> &object, const std::vector<cv::Point2f> &image,
@@ -165,7 +186,7 @@ PoseEstimate estimate_pose(std::span<const cv::Vec3f> prev_xyz, std::span<const 
 	std::uniform_int_distribution<size_t> pick(0, object.size() - 1);
 	double rms = 0;
 	std::vector<int> inliers;
-	size_t best_support = 0;
+	size_t best_support = 0, best_cells = 0;
 	geometry::Pose best;
 	// Samples needed: with a fraction w of inliers, one sample of 3 is all inliers with probability w^3, so
 	// log(1 - confidence) / log(1 - w^3) samples find one with the wanted confidence. At least a few are drawn
@@ -208,12 +229,20 @@ PoseEstimate estimate_pose(std::span<const cv::Vec3f> prev_xyz, std::span<const 
 				pose_of(rvecs[static_cast<size_t>(solution)], tvecs[static_cast<size_t>(solution)]);
 			if (!plausible(hypothesis))
 				continue;
-			const size_t support =
+			const Support support =
 				count_inliers(object, image, rig, hypothesis, params.ransac_threshold_px);
-			if (support > best_support) {
-				best_support = support;
+			// By spread first: a mover is a compact patch of many points, the static scene spreads over the
+			// image, so a hypothesis that explains a far wall and a mover passing in front of it (the two
+			// look alike when a rotation trades for a translation) loses to one explaining the wall and the
+			// sparse ground below.
+			const bool better = params.ransac_spread_score ? std::pair(support.cells, support.points) >
+										 std::pair(best_cells, best_support)
+								       : support.points > best_support;
+			if (better) {
+				best_support = support.points;
+				best_cells = support.cells;
 				best = hypothesis;
-				needed = samples_for(support);
+				needed = samples_for(support.points);
 			}
 		}
 	}

@@ -34,6 +34,9 @@ struct EgoParams {
 	/// Stop sampling once a sample of all inliers has been drawn with this probability, given the best inlier
 	/// fraction so far (the usual adaptive RANSAC bound); 0 draws all `ransac_iterations`.
 	double ransac_confidence = 0.999;
+	/// RANSAC prefers the hypothesis whose inliers spread over more cells of a coarse image grid (then the
+	/// one with more inliers) instead of the one with most inliers.
+	bool ransac_spread_score = true;
 	int min_inliers = 15;	     ///< fewer: the pose is not trusted (ego.valid = false)
 	double max_depth_m = 60;     ///< farther points carry no translation; they still vote for rotation
 	double pixel_sigma_px = 1.0; ///< feature position noise for the geometric test (when not measured)

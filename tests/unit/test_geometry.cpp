@@ -187,6 +187,46 @@ TEST(Geometry, PnpRecoversAKnownPoseDespiteOutliers)
 	EXPECT_NE(few.reason.find("only 5"), std::string::npos);
 }
 
+TEST(Geometry, RansacTakesTheSpreadOutSceneOverALargerCompactMover)
+{
+	// 100 static points spread over the image at 2-22 m, and 150 points on a mover: a compact patch 60 px
+	// across at 6 m that moves rigidly (0.3 m to the right, 40 px). Counted by inliers the mover's motion wins
+	// (150 and more against 100); counted by the grid cells its inliers cover, the camera's own. All 200
+	// samples are drawn (confidence 0) so that both rules see the same hypotheses: adaptive RANSAC stops
+	// sooner when the mover's hypothesis comes first.
+	const geometry::Pose truth{geometry::rotation_from_vector({0.0, 0.003, 0.0}), {0.001, 0.0, 0.0}};
+	const geometry::Pose mover_motion{truth.r, truth.t + cv::Vec3d(0.3, 0, 0)};
+	std::mt19937 rng(11);
+	std::uniform_real_distribution<double> unit(0, 1);
+	std::vector<cv::Vec3f> xyz;
+	std::vector<cv::Point2f> px;
+	for (int i = 0; i < 100; ++i) {
+		const double z = 2 + 20 * unit(rng);
+		const auto p = *kRig.triangulate(unit(rng) * 639, unit(rng) * 479, kRig.fx * kRig.baseline_m / z);
+		xyz.emplace_back(p);
+		px.emplace_back(*kRig.project(truth * p));
+	}
+	for (int i = 0; i < 150; ++i) {
+		const auto p = *kRig.triangulate(300 + 60 * unit(rng), 200 + 60 * unit(rng),
+						 kRig.fx * kRig.baseline_m / (6 + 0.2 * unit(rng)));
+		xyz.emplace_back(p);
+		px.emplace_back(*kRig.project(mover_motion * p));
+	}
+	const std::vector<uint8_t> votes(xyz.size(), 1);
+	EgoParams by_spread;
+	by_spread.ransac_confidence = 0;
+	const PoseEstimate spread = estimate_pose(xyz, px, votes, kRig, by_spread);
+	ASSERT_TRUE(spread.valid) << spread.reason;
+	EXPECT_EQ(spread.inliers, 100);
+	EXPECT_LT(cv::norm(spread.curr_from_prev.t - truth.t), 1e-4);
+	EgoParams by_count = by_spread;
+	by_count.ransac_spread_score = false;
+	const PoseEstimate counted = estimate_pose(xyz, px, votes, kRig, by_count);
+	ASSERT_TRUE(counted.valid) << counted.reason;
+	EXPECT_GE(counted.inliers, 150);
+	EXPECT_GT(cv::norm(counted.curr_from_prev.t - truth.t), 0.1);
+}
+
 TEST(Geometry, TheTestsNoiseIsMeasuredFromThePoseFit)
 {
 	// Static points seen with 0.3 px of Gaussian noise per axis, a tenth of them movers: the pose fit's
