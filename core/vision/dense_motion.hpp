@@ -47,8 +47,8 @@ struct DenseFlowParams {
 	int min_cells = 12;
 	/// Depth of a cell from the stereo points within this many cells of it (their median); none beyond.
 	int depth_radius_cells = 2;
-	/// Labels: a feature point on a cell a group holds joins the group (join_by_cells), whatever its own
-	/// residual says, unless that residual stands still (join_by_cells).
+	/// Labels: a feature point on a cell a group holds joins the group when it has a residual of its own of
+	/// at least half groups.min_flow_px, however far that is from the group's (join_by_cells).
 	bool label_cells = true;
 };
 
