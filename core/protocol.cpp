@@ -136,7 +136,8 @@ std::string frame_message(const FrameResult &result)
 				     {"matched", s.matched},
 				     {"candidates", s.candidates},
 				     {"outside_band", s.outside_band},
-				     {"median_row_diff_px", round_to(s.median_row_diff_px, 0.001)}};
+				     {"median_row_diff_px", round_to(s.median_row_diff_px, 0.001)},
+				     {"row_search", s.row_search}};
 	}
 
 	json groups = json::array();
@@ -314,9 +315,12 @@ FrameResult parse_frame_message(const json &message)
 	}
 	if (message.contains("stereo")) {
 		const auto &s = message.at("stereo");
-		result.stereo =
-			StereoSummary{field<int>(s, "keypoints"), field<int>(s, "matched"), field<int>(s, "candidates"),
-				      field<int>(s, "outside_band"), field<float>(s, "median_row_diff_px")};
+		result.stereo = StereoSummary{field<int>(s, "keypoints"),
+					      field<int>(s, "matched"),
+					      field<int>(s, "candidates"),
+					      field<int>(s, "outside_band"),
+					      field<float>(s, "median_row_diff_px"),
+					      s.contains("row_search") ? field<int>(s, "row_search") : 0};
 	}
 	for (const auto &g : message.at("groups")) {
 		TargetGroup group;
@@ -493,7 +497,8 @@ std::string_view frame_json_schema()
       "type": "object",
       "properties": {
         "keypoints": {"type": "integer"}, "matched": {"type": "integer"}, "candidates": {"type": "integer"},
-        "outside_band": {"type": "integer"}, "median_row_diff_px": {"type": "number"}
+        "outside_band": {"type": "integer"}, "median_row_diff_px": {"type": "number"},
+        "row_search": {"type": "integer"}
       }
     },
     "groups": {

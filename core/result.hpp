@@ -66,6 +66,7 @@ struct StereoSummary {
 	int candidates = 0;	      ///< with a descriptor match anywhere in the wide health band
 	int outside_band = 0;	      ///< of those, best match off the epipolar band
 	float median_row_diff_px = 0; ///< v_left - v_right of the matches, sub-pixel
+	int row_search = 0;	      ///< of `matched`, found along the row of the right image (no right keypoint)
 };
 
 /// A moving-target group (core/vision/groups.hpp): points moving together against the static scene.

@@ -504,6 +504,21 @@ const std::vector<Option> &options()
 		o.push_back(number(
 			"stereo", "window_radius_px", "sub-pixel refinement window half-size",
 			[](DaemonConfig &c) -> int & { return c.motion.stereo.window_radius_px; }, 1, 15));
+		o.push_back(
+			boolean("stereo", "row_search",
+				"look for unmatched left keypoints along their row of the right image (correlation)",
+				[](DaemonConfig &c) -> bool & { return c.motion.stereo.row_search; }));
+		o.push_back(
+			boolean("stereo", "right_features",
+				"match the right eye's own features (seed 002); false: the row search alone, faster",
+				[](DaemonConfig &c) -> bool & { return c.motion.stereo.right_features; }));
+		o.push_back(number(
+			"stereo", "row_search_min_ncc", "correlation a row-search match needs",
+			[](DaemonConfig &c) -> double & { return c.motion.stereo.row_search_min_ncc; }, 0, 1));
+		o.push_back(number(
+			"stereo", "row_search_uniqueness",
+			"row search: (1 - best) <= this * (1 - best more than 2 px away)",
+			[](DaemonConfig &c) -> double & { return c.motion.stereo.row_search_uniqueness; }, 0, 1));
 		o.push_back(number(
 			"stereo", "disparity_sigma_px", "disparity noise after refinement (depth uncertainty)",
 			[](DaemonConfig &c) -> double & { return c.motion.stereo.disparity_sigma_px; }, 0.01, 10));
@@ -1134,6 +1149,10 @@ void validate(const DaemonConfig &config, const std::string &origin)
 		    << c.alpha + c.beta + c.gamma;
 		throw ConfigError(msg.str());
 	}
+	const auto &stereo = config.motion.stereo;
+	if (stereo.enabled && !stereo.right_features && !stereo.row_search)
+		throw ConfigError(origin + ": stereo.right_features = false needs stereo.row_search = true (without "
+					   "either there is nothing to match the left keypoints to)");
 }
 
 std::vector<std::string> changed_options(const DaemonConfig &a, const DaemonConfig &b)

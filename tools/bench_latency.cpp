@@ -1,6 +1,7 @@
 // Benchmark (not a test): the daemon's pipeline on the live sim at its frame rate, capture-to-publish
 // latency percentiles and throughput, with the vision stages off (the spine alone), on the left eye (the
-// monocular ORB path) and on the whole stereo path (both eyes' features, stereo, pose, geometric check).
+// monocular ORB path) and on the whole stereo path (both eyes' features, stereo, pose, geometric check), the
+// last also with the stereo stage's other ways: seed 002's descriptor matching alone, the row search alone.
 // With --dds, the stereo path again with the daemon's publisher: NDJSON messages only (DDS off), NDJSON + DDS
 // with no subscriber, and NDJSON + DDS with a subscriber in another participant taking every sample: issue
 // 18's "p99 within 10 % of DDS off", measured in one run.
@@ -91,7 +92,8 @@ private:
 };
 
 Run run(const drivers::SourceConfig &source_config, Path path, double seconds, size_t workers,
-	Publish publish = Publish::None, vision::GroupFlow flow = vision::GroupFlow::Sparse)
+	Publish publish = Publish::None, vision::GroupFlow flow = vision::GroupFlow::Sparse,
+	const vision::StereoParams &stereo = {})
 {
 	std::unique_ptr<daemon::DdsPublisher> dds;
 	std::unique_ptr<Subscriber> subscriber;
@@ -112,6 +114,7 @@ Run run(const drivers::SourceConfig &source_config, Path path, double seconds, s
 	if (path == Path::Stereo)
 		options.motion.rig = source->info().calibration; // both eyes' features, stereo, pose, geometric check
 	options.motion.dense.method = flow; // the groups' members: feature matches, or seed 002's global flow
+	options.motion.stereo = stereo;
 	std::mutex m;
 	std::vector<int64_t> latencies;
 	std::map<std::string, double> stages;
@@ -197,6 +200,15 @@ int main(int argc, char **argv)
 	row("spine only (vision off)", run(config, Path::Spine, seconds, workers));
 	row("ORB + seed-000 (left eye)", run(config, Path::Mono, seconds, workers));
 	row("stereo: both eyes, pose", run(config, Path::Stereo, seconds, workers));
+	// The stereo stage's other ways (docs/geometry.md): seed 002's descriptor matching alone, and the row
+	// search alone without the right eye's features.
+	vision::StereoParams descriptors_only, rows_only;
+	descriptors_only.row_search = false;
+	rows_only.right_features = false;
+	row("stereo, descriptors only",
+	    run(config, Path::Stereo, seconds, workers, Publish::None, vision::GroupFlow::Sparse, descriptors_only));
+	row("stereo, row search only",
+	    run(config, Path::Stereo, seconds, workers, Publish::None, vision::GroupFlow::Sparse, rows_only));
 	if (with_flow) {
 		row("stereo, groups.flow = lk",
 		    run(config, Path::Stereo, seconds, workers, Publish::None, vision::GroupFlow::PyrLk));

@@ -236,13 +236,16 @@ FrameFeatures extract_stage(const StereoFrame &frame, const MotionParams &params
 	StageTimer timer(timing, "stereo");
 	const cv::Mat right_grey = grey_of(frame.right);
 	const FrameFeatures right =
-		extract_features(frame.right, params.features, params.classifier.colour_radius, &right_grey);
+		params.stereo.right_features
+			? extract_features(frame.right, params.features, params.classifier.colour_radius, &right_grey)
+			: FrameFeatures{};
 	const double scale_step = params.features.detector == Detector::Orb ? params.features.orb_scale : 1.4;
 	StereoDepth depth = match_stereo(features, right, grey, right_grey, *params.rig, params.stereo, scale_step);
 	features.xyz = std::move(depth.xyz);
 	add_cell_depths(features, frame.left.size(), params);
-	features.stereo = StereoSummary{static_cast<int>(features.keypoints.size()), depth.matched, depth.candidates,
-					depth.outside_band, median_of(std::move(depth.row_differences))};
+	features.stereo = StereoSummary{
+		static_cast<int>(features.keypoints.size()), depth.matched,	depth.candidates, depth.outside_band,
+		median_of(std::move(depth.row_differences)), depth.row_searched};
 	return features;
 }
 

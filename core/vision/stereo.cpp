@@ -88,6 +88,106 @@ struct Best {
 	}
 };
 
+/// Zero-mean normalised correlation of `patch` at every column of a strip of its height: the best column,
+/// and the best more than 2 columns from it (a second candidate rather than the best's own slope).
+struct RowPeak {
+	int column = -1;
+	float best = -2;
+	float elsewhere = -2;
+};
+
+/// acc[k] += weight * pixels[k]: a function of its own so that the compiler knows the arrays do not overlap
+/// (uint8_t may alias anything) and vectorises the loop.
+void add_scaled(int32_t *__restrict acc, const uint8_t *__restrict pixels, int32_t weight, int count)
+{
+	for (int k = 0; k < count; ++k)
+		acc[k] += weight * static_cast<int32_t>(pixels[k]);
+}
+
+/// sum[k] += pixels[k], squares[k] += pixels[k]^2.
+void add_column(int32_t *__restrict sum, int32_t *__restrict squares, const uint8_t *__restrict pixels, int count)
+{
+	for (int k = 0; k < count; ++k) {
+		const int32_t v = pixels[k];
+		sum[k] += v;
+		squares[k] += v * v;
+	}
+}
+
+/// score[k] = (cross[k] - patch_sum sum[k] / n) / sqrt(patch_spread (squares[k] - sum[k]^2 / n)), -1 where
+/// either window is flat.
+void correlations(float *__restrict score, const int32_t *__restrict cross, const float *__restrict sum,
+		  const float *__restrict squares, float patch_sum, float patch_spread, float inverse_n, int count)
+{
+	for (int k = 0; k < count; ++k) {
+		const float spread = patch_spread * (squares[k] - sum[k] * sum[k] * inverse_n);
+		const float numerator = static_cast<float>(cross[k]) - patch_sum * sum[k] * inverse_n;
+		const float correlation = numerator / std::sqrt(std::max(spread, 1e-6F)); // no branch: vectorises
+		score[k] = spread > 0 ? correlation : -1.0F;
+	}
+}
+
+/// Written out rather than cv::matchTemplate, which costs about 0.15 ms a call at this size (its set-up
+/// dominates): the cross term's inner loop runs along the strip and vectorises, and the windows' sums slide.
+/// The numerator needs no mean of the strip's window: sum((T - mean T) R) = sum(T R) - sum(T) sum(R) / n.
+RowPeak correlate_along(const cv::Mat &strip, const cv::Mat &patch, RowSearchBuffers &buffers)
+{
+	const int side = patch.cols;
+	const int positions = strip.cols - side + 1;
+	auto &cross = buffers.cross;
+	auto &column_sum = buffers.column_sum;
+	auto &column_squares = buffers.column_squares;
+	cross.assign(static_cast<size_t>(positions), 0);
+	column_sum.assign(static_cast<size_t>(strip.cols), 0);
+	column_squares.assign(static_cast<size_t>(strip.cols), 0);
+	int64_t patch_sum = 0, patch_squares = 0;
+	for (int dy = 0; dy < side; ++dy) {
+		const uint8_t *t = patch.ptr<uint8_t>(dy);
+		const uint8_t *row = strip.ptr<uint8_t>(dy);
+		for (int dx = 0; dx < side; ++dx) {
+			const int32_t weight = t[dx];
+			patch_sum += weight;
+			patch_squares += weight * weight;
+			add_scaled(cross.data(), row + dx, weight, positions);
+		}
+		add_column(column_sum.data(), column_squares.data(), row, strip.cols);
+	}
+	// The windows' sums slide along the strip; then every position's correlation in one loop that vectorises.
+	auto &window_sum = buffers.window_sum;
+	auto &window_squares = buffers.window_squares;
+	window_sum.resize(static_cast<size_t>(positions));
+	window_squares.resize(static_cast<size_t>(positions));
+	int32_t sum = 0, squares = 0;
+	for (int c = 0; c < strip.cols; ++c) {
+		sum += column_sum[static_cast<size_t>(c)];
+		squares += column_squares[static_cast<size_t>(c)];
+		if (c >= side) {
+			sum -= column_sum[static_cast<size_t>(c - side)];
+			squares -= column_squares[static_cast<size_t>(c - side)];
+		}
+		if (c >= side - 1) {
+			window_sum[static_cast<size_t>(c - side + 1)] = static_cast<float>(sum);
+			window_squares[static_cast<size_t>(c - side + 1)] = static_cast<float>(squares);
+		}
+	}
+	auto &score = buffers.score;
+	score.resize(static_cast<size_t>(positions));
+	const float inverse_n = 1.0F / static_cast<float>(side * side);
+	const auto patch_total = static_cast<float>(patch_sum);
+	correlations(score.data(), cross.data(), window_sum.data(), window_squares.data(), patch_total,
+		     static_cast<float>(patch_squares) - patch_total * patch_total * inverse_n, inverse_n, positions);
+	RowPeak peak;
+	for (int k = 0; k < positions; ++k)
+		if (score[static_cast<size_t>(k)] > peak.best) {
+			peak.best = score[static_cast<size_t>(k)];
+			peak.column = k;
+		}
+	for (int k = 0; k < positions; ++k)
+		if (std::abs(k - peak.column) > 2)
+			peak.elsewhere = std::max(peak.elsewhere, score[static_cast<size_t>(k)]);
+	return peak;
+}
+
 } // namespace
 
 void CalibrationHealth::add(const StereoSummary &frame)
@@ -145,6 +245,50 @@ float refine_disparity(const cv::Mat &left_grey, const cv::Mat &right_grey, cv::
 	return static_cast<float>(best + vertex_offset(at(best - 1), at(best), at(best + 1)));
 }
 
+float search_row(const cv::Mat &left_grey, const cv::Mat &right_grey, cv::Point2f left_pt, const StereoParams &params,
+		 RowSearchBuffers &buffers)
+{
+	const int x = static_cast<int>(std::lround(left_pt.x));
+	const int y = static_cast<int>(std::lround(left_pt.y));
+	const int r = params.window_radius_px;
+	if (!window_inside(left_grey, x, y, r) || y + r >= right_grey.rows)
+		return kNaN;
+	// Disparities whose right window lies inside the right image.
+	const int d_lo = std::max(static_cast<int>(std::ceil(params.min_disparity_px)), x + r - right_grey.cols + 1);
+	const int d_hi = std::min(static_cast<int>(std::floor(params.max_disparity_px)), x - r);
+	if (d_hi - d_lo < 2)
+		return kNaN;
+	const int side = 2 * r + 1;
+	const cv::Mat patch = left_grey(cv::Rect(x - r, y - r, side, side));
+	cv::Scalar mean, deviation;
+	cv::meanStdDev(patch, mean, deviation);
+	// Below a few grey levels the window is flat and its correlation is that of noise.
+	constexpr double kMinDeviation = 4;
+	if (deviation[0] < kMinDeviation)
+		return kNaN;
+	// Strip column k holds the right window centred at x - d_hi + k: disparity d_hi - k.
+	const RowPeak forward =
+		correlate_along(right_grey(cv::Rect(x - d_hi - r, y - r, d_hi - d_lo + side, side)), patch, buffers);
+	const int last = d_hi - d_lo;
+	if (forward.best < params.row_search_min_ncc || forward.column == 0 || forward.column == last ||
+	    1 - forward.best > params.row_search_uniqueness * (1 - forward.elsewhere))
+		return kNaN;
+	const int d = d_hi - forward.column;
+
+	// Two-way: the right window at the match, searched along the left row over the same disparities.
+	const int xr = x - d;
+	const int b_lo = std::max(d_lo, r - xr);
+	const int b_hi = std::min(d_hi, left_grey.cols - 1 - r - xr);
+	if (b_hi - b_lo < 2)
+		return kNaN;
+	// Strip column k holds the left window centred at xr + b_lo + k: disparity b_lo + k.
+	const RowPeak back = correlate_along(left_grey(cv::Rect(xr + b_lo - r, y - r, b_hi - b_lo + side, side)),
+					     right_grey(cv::Rect(xr - r, y - r, side, side)), buffers);
+	if (std::abs(b_lo + back.column - d) > 1)
+		return kNaN;
+	return refine_disparity(left_grey, right_grey, left_pt, static_cast<float>(d), params.refine_radius_px, r);
+}
+
 float row_offset(const cv::Mat &left_grey, const cv::Mat &right_grey, cv::Point2f left_pt, float disparity_px,
 		 int window_radius)
 {
@@ -169,19 +313,14 @@ float row_offset(const cv::Mat &left_grey, const cv::Mat &right_grey, cv::Point2
 	return static_cast<float>(-dy);
 }
 
-StereoDepth match_stereo(const FrameFeatures &left, const FrameFeatures &right, const cv::Mat &left_grey,
-			 const cv::Mat &right_grey, const geometry::StereoRig &rig, const StereoParams &params,
-			 double detector_scale_step)
+namespace {
+
+/// Seed 002's matching of left to right keypoints under the four constraints (match_stereo), into `out`.
+void match_descriptors(const FrameFeatures &left, const FrameFeatures &right, const cv::Mat &left_grey,
+		       const cv::Mat &right_grey, const geometry::StereoRig &rig, const StereoParams &params,
+		       double detector_scale_step, StereoDepth &out)
 {
 	const size_t n_left = left.keypoints.size();
-	StereoDepth out;
-	out.disparity.assign(n_left, kNaN);
-	out.xyz.assign(n_left, cv::Vec3f(kNaN, kNaN, kNaN));
-	out.right_index.assign(n_left, -1);
-	if (n_left == 0 || right.keypoints.empty() || left.descriptors.empty() || right.descriptors.empty() ||
-	    left.norm_type != right.norm_type)
-		return out;
-
 	const double step = detector_scale_step > 1 ? detector_scale_step : 1.2;
 	const double max_size_ratio = params.max_size_ratio > 0 ? params.max_size_ratio : step * 1.05;
 	// Keypoints found on pyramid level L are located to about step^L pixels; the row tolerance is one pixel
@@ -273,6 +412,50 @@ StereoDepth match_stereo(const FrameFeatures &left, const FrameFeatures &right, 
 		out.right_index[i] = f.index;
 		out.row_differences.push_back(row_offset(left_grey, right_grey, l.pt, d, params.window_radius_px));
 		++out.matched;
+	}
+}
+
+} // namespace
+
+StereoDepth match_stereo(const FrameFeatures &left, const FrameFeatures &right, const cv::Mat &left_grey,
+			 const cv::Mat &right_grey, const geometry::StereoRig &rig, const StereoParams &params,
+			 double detector_scale_step)
+{
+	const size_t n_left = left.keypoints.size();
+	StereoDepth out;
+	out.disparity.assign(n_left, kNaN);
+	out.xyz.assign(n_left, cv::Vec3f(kNaN, kNaN, kNaN));
+	out.right_index.assign(n_left, -1);
+	const bool descriptors = !right.keypoints.empty() && !left.descriptors.empty() && !right.descriptors.empty() &&
+				 left.norm_type == right.norm_type;
+	if (n_left > 0 && descriptors)
+		match_descriptors(left, right, left_grey, right_grey, rig, params, detector_scale_step, out);
+	if (!params.row_search)
+		return out;
+	// The rest along their rows. These matches assume the rows agree: beside descriptor matches they say
+	// nothing of the rig's health and stay out of row_differences. Without right keypoints they are all
+	// there is, and their row offsets still show a rig drifting by a fraction of a pixel (further off, the
+	// correlation refuses the matches and `matched` falls).
+	RowSearchBuffers buffers;
+	for (size_t i = 0; i < n_left; ++i) {
+		if (!std::isnan(out.disparity[i]))
+			continue;
+		const cv::Point2f pt = left.keypoints[i].pt;
+		const float d = search_row(left_grey, right_grey, pt, params, buffers);
+		if (!(d >= static_cast<float>(params.min_disparity_px)) ||
+		    d > static_cast<float>(params.max_disparity_px))
+			continue;
+		const auto p = rig.triangulate(pt.x, pt.y, d);
+		if (!p)
+			continue;
+		out.disparity[i] = d;
+		out.xyz[i] = cv::Vec3f(static_cast<float>((*p)[0]), static_cast<float>((*p)[1]),
+				       static_cast<float>((*p)[2]));
+		if (!descriptors)
+			out.row_differences.push_back(
+				row_offset(left_grey, right_grey, pt, d, params.window_radius_px));
+		++out.matched;
+		++out.row_searched;
 	}
 	return out;
 }

@@ -8,6 +8,8 @@
 // Sub-pixel: sum of absolute differences of a window around the left point against the right image at
 // integer disparities d0 - r .. d0 + r, the minimum, and the equiangular (V) fit through it and its neighbours.
 // The depth is then z = f b / d (geometry/rig.hpp).
+// Left keypoints without a right keypoint to match (the right eye's detector missed the corner) are then
+// looked for along their row of the right image by correlation (search_row), unless row_search is off.
 #include <cmath>
 #include <cstdint>
 #include <vector>
@@ -30,6 +32,15 @@ struct StereoParams {
 	int refine_radius_px = 2;	 ///< sub-pixel search around the matched disparity
 	int window_radius_px = 5;	 ///< SAD window half-size (11 x 11)
 	double disparity_sigma_px = 0.3; ///< disparity noise after refinement, for depth uncertainty
+	/// A left keypoint the descriptors leave unmatched (most often the right eye's detector did not fire on
+	/// the same corner) is looked for along its rectified row of the right image instead: the window's
+	/// normalised correlation at every disparity in range (search_row).
+	bool row_search = true;
+	/// false: the right eye's features are not extracted and every left keypoint is found by the row search
+	/// alone (the right eye's detector and descriptors are about two thirds of the stereo stage's time).
+	bool right_features = true;
+	double row_search_min_ncc = 0.9;    ///< correlation the best disparity needs
+	double row_search_uniqueness = 0.5; ///< (1 - best) <= this * (1 - best more than 2 px away)
 	/// Calibration health: a wider band (this many rows) is searched too, to see how many best matches fall
 	/// outside the epipolar band and how far rows disagree.
 	double health_band_px = 8.0;
@@ -41,13 +52,15 @@ struct StereoDepth {
 	std::vector<cv::Vec3f> xyz;	    ///< left camera, metres; NaN where disparity is
 	std::vector<int> right_index;	    ///< matched right keypoint, -1 = none
 	int matched = 0;		    ///< left keypoints with a depth
+	int row_searched = 0;		    ///< of those, found by search_row (no right keypoint)
 	int candidates = 0;		    ///< left keypoints with any descriptor match inside the health band
 	int outside_band = 0;		    ///< of those, best match outside the epipolar band (miscalibration)
 	std::vector<float> row_differences; ///< v_left - v_right of the accepted matches (row_offset)
 };
 
-/// Matches left to right features (both from extract_features on the rectified images) and measures depth.
-/// `left_grey`/`right_grey` are the rectified 8-bit images the keypoints were found in.
+/// Matches left to right features (both from extract_features on the rectified images) and measures depth;
+/// then the row search for the left keypoints left over. `right` may be empty (right_features off): the row
+/// search alone. `left_grey`/`right_grey` are the rectified 8-bit images the keypoints were found in.
 StereoDepth match_stereo(const FrameFeatures &left, const FrameFeatures &right, const cv::Mat &left_grey,
 			 const cv::Mat &right_grey, const geometry::StereoRig &rig, const StereoParams &params,
 			 double detector_scale_step);
@@ -57,6 +70,20 @@ StereoDepth match_stereo(const FrameFeatures &left, const FrameFeatures &right, 
 /// image or the minimum lies on the search edge (the match was wrong by more than the radius).
 float refine_disparity(const cv::Mat &left_grey, const cv::Mat &right_grey, cv::Point2f left_pt, float disparity_px,
 		       int radius, int window_radius);
+
+/// Disparity of a left point found by searching its row of the right image, for a point without a right
+/// keypoint: the zero-mean normalised correlation of the (2 window_radius + 1)^2 window at every integer
+/// disparity in [min_disparity_px, max_disparity_px]. Accepted when the best reaches row_search_min_ncc, no
+/// disparity more than 2 px away comes near it (row_search_uniqueness), it is not on the range's edge, and
+/// the right window searched back along the left row lands within 1 px of the start (two-way); then
+/// refine_disparity. NaN otherwise, and for a flat window (correlation of noise).
+/// `buffers` are reused from call to call.
+struct RowSearchBuffers {
+	std::vector<int32_t> cross, column_sum, column_squares;
+	std::vector<float> window_sum, window_squares, score;
+};
+float search_row(const cv::Mat &left_grey, const cv::Mat &right_grey, cv::Point2f left_pt, const StereoParams &params,
+		 RowSearchBuffers &buffers);
 
 /// Calibration health: v_left - v_right at a stereo match, to a fraction of a pixel (the SAD minimum over
 /// rows -2..2 of the right image at the matched disparity, and a V fit). NaN near the image border.

@@ -92,6 +92,13 @@ TEST(Config, TextureWeightsMustSumToOne)
 	EXPECT_NE(e.find("must be 1 (eq. 4)"), std::string::npos) << e;
 }
 
+TEST(Config, StereoNeedsAWayToMatchTheRightEye)
+{
+	const std::string e = error_of("[stereo]\nright_features = false\nrow_search = false\n");
+	EXPECT_NE(e.find("stereo.right_features = false needs stereo.row_search = true"), std::string::npos) << e;
+	EXPECT_EQ(error_of("[stereo]\nright_features = false\n"), "");
+}
+
 TEST(Config, OverridesTakeBareWordsAndNumbers)
 {
 	DaemonConfig config;

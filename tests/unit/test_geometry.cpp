@@ -401,6 +401,77 @@ TEST(Stereo, MatchesConstructedPairAndMeasuresDepthAndRowHealth)
 	const FrameFeatures df = extract_features(dropped, fp, 1);
 	const StereoDepth bumped = match_stereo(lf, df, left, dropped, kRig, StereoParams{}, fp.orb_scale);
 	EXPECT_GT(bumped.outside_band, bumped.candidates / 2);
+	// The row search assumes the rows agree; 2.3 rows off, its correlation and two-way check refuse (0 here)
+	// rather than give depths from the wrong row.
+	EXPECT_LE(bumped.row_searched, 5);
+}
+
+TEST(Stereo, SearchesTheRowWhereTheRightEyeHasNoKeypoint)
+{
+	const cv::Mat left = texture(640, 480, 5);
+	const double d = 16.4;
+	const cv::Mat right = shifted(left, d);
+	const StereoParams params;
+	RowSearchBuffers buffers;
+	for (const cv::Point2f p : {cv::Point2f(100, 100), cv::Point2f(320, 240), cv::Point2f(600, 400)})
+		EXPECT_NEAR(search_row(left, right, p, params, buffers), d, 0.25) << p;
+	// No answer where there is none: a flat window, stripes repeating every 8 px (every 8th disparity fits as
+	// well), a window off the image.
+	const cv::Mat flat(480, 640, CV_8U, cv::Scalar(90));
+	EXPECT_TRUE(std::isnan(search_row(flat, flat, {320, 240}, params, buffers)));
+	cv::Mat stripes(480, 640, CV_8U);
+	for (int x = 0; x < stripes.cols; ++x)
+		stripes.col(x).setTo(x % 8 < 4 ? 200 : 50);
+	EXPECT_TRUE(std::isnan(search_row(stripes, shifted(stripes, 5), {320, 240}, params, buffers)));
+	EXPECT_TRUE(std::isnan(search_row(left, right, {3, 240}, params, buffers)));
+
+	// The right eye's detector missed every corner left of x = 320: those left points get their depth from
+	// the row search (and only with it).
+	FeatureParams fp;
+	fp.max_features = 500;
+	const FrameFeatures lf = extract_features(left, fp, 1);
+	const FrameFeatures all_right = extract_features(right, fp, 1);
+	FrameFeatures rf = all_right;
+	rf.keypoints.clear();
+	rf.descriptors = cv::Mat();
+	for (size_t j = 0; j < all_right.keypoints.size(); ++j)
+		if (all_right.keypoints[j].pt.x >= 320) {
+			rf.keypoints.push_back(all_right.keypoints[j]);
+			rf.descriptors.push_back(all_right.descriptors.row(static_cast<int>(j)));
+		}
+	const auto left_half_with_depth = [&](const StereoDepth &depth) {
+		int with = 0, right_value = 0;
+		for (size_t i = 0; i < lf.keypoints.size(); ++i)
+			if (lf.keypoints[i].pt.x < 320 - d - 8 && !std::isnan(depth.disparity[i])) {
+				++with;
+				right_value += std::abs(depth.disparity[i] - d) < 0.25 ? 1 : 0;
+			}
+		return std::pair{with, right_value};
+	};
+	StereoParams descriptors_only;
+	descriptors_only.row_search = false;
+	const StereoDepth without = match_stereo(lf, rf, left, right, kRig, descriptors_only, fp.orb_scale);
+	EXPECT_EQ(left_half_with_depth(without).first, 0);
+	EXPECT_EQ(without.row_searched, 0);
+	const StereoDepth with = match_stereo(lf, rf, left, right, kRig, params, fp.orb_scale);
+	const auto [found, right_values] = left_half_with_depth(with);
+	EXPECT_GT(found, 100);
+	EXPECT_GT(right_values, found * 9 / 10);
+	EXPECT_GE(with.row_searched, found);
+	EXPECT_EQ(with.matched, without.matched + with.row_searched);
+
+	// No right features at all (stereo.right_features = false): every depth from the row search, and its
+	// row offsets still show a rig whose right camera dropped 0.6 rows.
+	const StereoDepth rows_only = match_stereo(lf, FrameFeatures{}, left, right, kRig, params, fp.orb_scale);
+	EXPECT_GT(rows_only.matched, static_cast<int>(lf.keypoints.size()) * 8 / 10);
+	EXPECT_EQ(rows_only.row_searched, rows_only.matched);
+	EXPECT_NEAR(median_of(rows_only.row_differences), 0, 0.1);
+	cv::Mat dropped;
+	cv::warpAffine(left, dropped, cv::Matx23d(1, 0, -d, 0, 1, 0.6), left.size(), cv::INTER_LINEAR,
+		       cv::BORDER_REFLECT_101);
+	const StereoDepth bumped = match_stereo(lf, FrameFeatures{}, left, dropped, kRig, params, fp.orb_scale);
+	EXPECT_GT(bumped.matched, 100);
+	EXPECT_NEAR(median_of(bumped.row_differences), -0.6, 0.15);
 }
 
 TEST(Matching, LucasKanadeRefinesToSubpixel)

@@ -71,7 +71,7 @@ TEST(Protocol, StereoPoseAndDepthRoundTrip)
 	ego.t_prev_curr = std::array<double, 16>{1, 0, 0, 0.01, 0, 1, 0, 0, 0, 0, 1, 0.0466667, 0, 0, 0, 1};
 	ego.t_world_curr = ego.t_prev_curr;
 	r.ego = ego;
-	r.stereo = StereoSummary{900, 612, 700, 7, -0.125F};
+	r.stereo = StereoSummary{900, 612, 700, 7, -0.125F, 250};
 	const std::string text = protocol::frame_message(r);
 	const auto json = nlohmann::json::parse(text);
 	EXPECT_TRUE(json.at("ego").at("homography").is_null());
@@ -87,6 +87,7 @@ TEST(Protocol, StereoPoseAndDepthRoundTrip)
 	ASSERT_TRUE(back.stereo.has_value());
 	EXPECT_EQ(back.stereo->matched, 612);
 	EXPECT_FLOAT_EQ(back.stereo->median_row_diff_px, -0.125F);
+	EXPECT_EQ(back.stereo->row_search, 250);
 
 	ego.valid = false;
 	ego.reason = "only 3 static points with depth (need 15)";
