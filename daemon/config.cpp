@@ -749,8 +749,13 @@ const std::vector<Option> &options()
 			"never",
 			[](DaemonConfig &c) -> int & { return c.motion.groups.coast_frames; }, 0, 1000));
 		o.push_back(number(
-			"groups", "smoothing", "tracks: weight of the new measurement in the velocity averages",
+			"groups", "smoothing",
+			"tracks: weight of the new measurement in the metric velocity averages (after a running "
+			"mean over the first 1 / smoothing frames)",
 			[](DaemonConfig &c) -> double & { return c.motion.groups.smoothing; }, 0.01, 1));
+		o.push_back(number(
+			"groups", "image_smoothing", "tracks: the same for the image velocity that predicts the box",
+			[](DaemonConfig &c) -> double & { return c.motion.groups.image_smoothing; }, 0.01, 1));
 		o.push_back(boolean("groups", "label_points", "label points inside a group moving with it dynamic",
 				    [](DaemonConfig &c) -> bool & { return c.motion.groups.label_points; }));
 		o.push_back(number(

@@ -480,17 +480,24 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 		g.age_frames = old != nullptr ? old->age_frames + 1 : 1;
 		g.box = cluster.box;
 		g.centre = cluster.centre;
+		// A running mean over the track's first frames, then an exponential average: a young track is not
+		// held to its first, noisiest measurement. The image velocity, which predicts where the group is
+		// next, follows the camera's turns and keeps a lighter average than the metric velocities, which
+		// are measured through the pose and depth, noisier frame to frame, and change only as the mover's
+		// own gait does.
+		const double weight = std::max(params.smoothing, 1.0 / g.age_frames);
+		const double image_weight = std::max(params.image_smoothing, 1.0 / g.age_frames);
 		const cv::Point2f image_velocity = cluster.flow * static_cast<float>(fps);
 		g.image_velocity_pxps = old != nullptr
-						? old->image_velocity_pxps * static_cast<float>(1 - params.smoothing) +
-							  image_velocity * static_cast<float>(params.smoothing)
+						? old->image_velocity_pxps * static_cast<float>(1 - image_weight) +
+							  image_velocity * static_cast<float>(image_weight)
 						: image_velocity;
 		if (cluster.velocity)
-			g.velocity_mps = blend(old != nullptr ? old->velocity_mps : std::nullopt, *cluster.velocity,
-					       params.smoothing);
+			g.velocity_mps =
+				blend(old != nullptr ? old->velocity_mps : std::nullopt, *cluster.velocity, weight);
 		if (cluster.world_velocity)
 			g.world_velocity_mps = blend(old != nullptr ? old->world_velocity_mps : std::nullopt,
-						     *cluster.world_velocity, params.smoothing);
+						     *cluster.world_velocity, weight);
 		g.residual = cluster.residual;
 		if (g.age_frames < params.min_age_frames) {
 			out.memory.groups.push_back(g);

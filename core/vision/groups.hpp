@@ -51,7 +51,10 @@ struct GroupParams {
 	/// max_missed_frames, and no more frames than it had been published for), moved on by its velocities
 	/// and marked with missed_frames; 0: never.
 	int coast_frames = 2;
-	double smoothing = 0.5; ///< weight of the new measurement in the velocity averages
+	/// Weight of the new measurement in the velocity averages (after a running mean over the track's first
+	/// 1 / smoothing frames).
+	double smoothing = 0.2;
+	double image_smoothing = 0.5; ///< the same for the image velocity (the tracks' prediction)
 	/// Labels: a point inside a published group's box whose residual agrees with the group's (within the
 	/// larger of this and half the group's residual) becomes dynamic. 2 px: a keypoint's position is
 	/// quantised to its pyramid level, so a slow walker's own residual is off the group's by a pixel or two

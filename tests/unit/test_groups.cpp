@@ -216,6 +216,46 @@ TEST(Groups, IdsSurviveTwoGroupsCrossing)
 	}
 }
 
+TEST(Groups, WorldVelocityIsARunningMeanThenAnAverage)
+{
+	// Group A of the crossing scene alone, 5 m away, with a depth that says 1.0 m/s to the right give or take
+	// 0.4 m/s, alternating frame by frame (measurement noise); the camera stands still.
+	std::mt19937 rng(5);
+	GroupParams params; // smoothing 0.2: a running mean over the first 5 frames
+	AffinityPropagation workspace;
+	GroupMemory memory;
+	GroupMotionContext context;
+	context.dt_s = 0.1;
+	context.curr_from_prev = geometry::Pose{};
+	context.world_from_curr = geometry::Pose{};
+	for (int frame = 0; frame < 30; ++frame) {
+		auto points = crossing_frame(frame, rng);
+		points.resize(140);
+		const double measured = frame % 2 == 0 ? 0.6 : 1.4;
+		for (size_t i = 120; i < points.size(); ++i) {
+			const cv::Vec3f now(points[i].px.x / 100, 0, 5);
+			points[i].xyz = now;
+			points[i].prev_xyz = now - cv::Vec3f(static_cast<float>(measured * context.dt_s), 0, 0);
+		}
+		GroupOutput out = find_groups(points, frame == 0 ? nullptr : &memory, context, params, workspace);
+		memory = out.memory;
+		if (frame == 0)
+			continue;
+		ASSERT_EQ(out.groups.size(), 1u) << "frame " << frame;
+		ASSERT_TRUE(out.groups[0].world_velocity_mps.has_value());
+		const double vx = (*out.groups[0].world_velocity_mps)[0];
+		if (frame == 1) {
+			EXPECT_NEAR(vx, (0.6 + 1.4) / 2, 1e-4);
+		} else if (frame == 4) {
+			EXPECT_NEAR(vx, (0.6 + 1.4 + 0.6 + 1.4 + 0.6) / 5, 1e-4);
+		} else if (frame >= 5) {
+			// Then the average settles to swing by 0.4 * 0.2 / (2 - 0.2) = 0.044 around 1.0 (0.067 at frame
+			// 6, coming from 0.92); with a weight of 0.5 it would swing by 0.13.
+			EXPECT_NEAR(vx, 1.0, 0.08) << "frame " << frame;
+		}
+	}
+}
+
 TEST(Groups, AMissedGroupCoastsOnItsVelocityKeepingItsId)
 {
 	// Group A of the crossing scene alone (B's points dropped), seen for 6 frames, then missing from the
