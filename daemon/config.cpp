@@ -1004,6 +1004,43 @@ void apply_document(const Value &document, const std::string &origin, DaemonConf
 constexpr size_t kMaxConfigBytes = 1 << 20;
 constexpr int kMaxNesting = 32;
 
+/// TOML documents are UTF-8 (the spec requires it). Checked before toml11 sees the text: its 3.7 reads past
+/// its buffer when a literal string holds invalid UTF-8 (found by fuzz_config). Throws ConfigError naming the
+/// line of the first bad byte.
+void check_utf8(const std::string &text, const std::string &origin)
+{
+	size_t line = 1;
+	for (size_t i = 0; i < text.size();) {
+		const auto byte = static_cast<unsigned char>(text[i]);
+		if (byte < 0x80) {
+			line += byte == '\n' ? 1 : 0;
+			++i;
+			continue;
+		}
+		// The length the lead byte announces, and the smallest code point that needs it (no overlong forms).
+		const size_t length = byte >= 0xC2 && byte <= 0xDF   ? 2
+				      : byte >= 0xE0 && byte <= 0xEF ? 3
+				      : byte >= 0xF0 && byte <= 0xF4 ? 4
+								     : 0;
+		uint32_t code = length == 2 ? byte & 0x1FU : length == 3 ? byte & 0x0FU : byte & 0x07U;
+		bool valid = length > 0 && i + length <= text.size();
+		for (size_t k = 1; valid && k < length; ++k) {
+			const auto next = static_cast<unsigned char>(text[i + k]);
+			valid = (next & 0xC0U) == 0x80U;
+			code = (code << 6U) | (next & 0x3FU);
+		}
+		valid = valid && !(length == 3 && code < 0x800) && !(length == 4 && code < 0x10000) &&
+			!(code >= 0xD800 && code <= 0xDFFF) && code <= 0x10FFFF;
+		if (!valid) {
+			char hex[8];
+			std::snprintf(hex, sizeof(hex), "0x%02X", byte);
+			throw ConfigError(origin + ":" + std::to_string(line) + ": not valid UTF-8 (byte " + hex +
+					  "); a TOML file is UTF-8");
+		}
+		i += length;
+	}
+}
+
 /// Checks the nesting of arrays and inline tables, skipping strings and comments. Throws ConfigError naming
 /// the line where the limit is passed.
 void check_nesting(const std::string &text, const std::string &origin)
@@ -1054,6 +1091,7 @@ Value parse_toml(std::istream &in, const std::string &origin)
 		}
 		text = buffer.str();
 	}
+	check_utf8(text, origin);
 	check_nesting(text, origin);
 	std::istringstream parsed(text);
 	try {

@@ -92,6 +92,21 @@ TEST(Config, TextureWeightsMustSumToOne)
 	EXPECT_NE(e.find("must be 1 (eq. 4)"), std::string::npos) << e;
 }
 
+TEST(Config, TextThatIsNotUtf8IsRefusedWithItsLine)
+{
+	// fuzz_config's find: invalid UTF-8 in a literal string made toml11 3.7 read past its buffer.
+	std::string e = error_of("[sim]\n'so\xf6tputim.fps='e3\n");
+	EXPECT_NE(e.find("c.toml:2: not valid UTF-8 (byte 0xF6)"), std::string::npos) << e;
+	// An overlong '/', a surrogate, a lead byte with no continuation at the end of the file.
+	for (const std::string bad : {"\xc0\xaf", "\xed\xa0\x80", "\xf0\x9f"}) {
+		e = error_of("[output]\nsocket = \"/run/s" + bad + "\"\n");
+		EXPECT_NE(e.find("c.toml:2: not valid UTF-8"), std::string::npos) << e;
+	}
+	// Valid UTF-8 of every length reaches the parser (and the key's own check).
+	e = error_of("[output]\n# caf\xc3\xa9 \xe2\x82\xac \xf0\x9f\x98\x80\nsocket = \"/run/stereod/x.sock\"\n");
+	EXPECT_EQ(e, "");
+}
+
 TEST(Config, StereoNeedsAWayToMatchTheRightEye)
 {
 	const std::string e = error_of("[stereo]\nright_features = false\nrow_search = false\n");
