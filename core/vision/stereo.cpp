@@ -315,6 +315,21 @@ float row_offset(const cv::Mat &left_grey, const cv::Mat &right_grey, cv::Point2
 
 namespace {
 
+/// Left keypoint i's disparity and 3D point into `out`, when the disparity is in range and triangulates;
+/// false otherwise (NaN included).
+bool store_depth(size_t i, cv::Point2f pt, float d, const geometry::StereoRig &rig, const StereoParams &params,
+		 StereoDepth &out)
+{
+	if (!(d >= static_cast<float>(params.min_disparity_px)) || d > static_cast<float>(params.max_disparity_px))
+		return false;
+	const auto p = rig.triangulate(pt.x, pt.y, d);
+	if (!p)
+		return false;
+	out.disparity[i] = d;
+	out.xyz[i] = cv::Vec3f(static_cast<float>((*p)[0]), static_cast<float>((*p)[1]), static_cast<float>((*p)[2]));
+	return true;
+}
+
 /// Seed 002's matching of left to right keypoints under the four constraints (match_stereo), into `out`.
 void match_descriptors(const FrameFeatures &left, const FrameFeatures &right, const cv::Mat &left_grey,
 		       const cv::Mat &right_grey, const geometry::StereoRig &rig, const StereoParams &params,
@@ -400,15 +415,8 @@ void match_descriptors(const FrameFeatures &left, const FrameFeatures &right, co
 		const cv::KeyPoint &r = right.keypoints[static_cast<size_t>(f.index)];
 		const float d = refine_disparity(left_grey, right_grey, l.pt, l.pt.x - r.pt.x, params.refine_radius_px,
 						 params.window_radius_px);
-		if (!(d >= static_cast<float>(params.min_disparity_px)) ||
-		    d > static_cast<float>(params.max_disparity_px))
+		if (!store_depth(i, l.pt, d, rig, params, out))
 			continue;
-		const auto p = rig.triangulate(l.pt.x, l.pt.y, d);
-		if (!p)
-			continue;
-		out.disparity[i] = d;
-		out.xyz[i] = cv::Vec3f(static_cast<float>((*p)[0]), static_cast<float>((*p)[1]),
-				       static_cast<float>((*p)[2]));
 		out.right_index[i] = f.index;
 		out.row_differences.push_back(row_offset(left_grey, right_grey, l.pt, d, params.window_radius_px));
 		++out.matched;
@@ -442,15 +450,8 @@ StereoDepth match_stereo(const FrameFeatures &left, const FrameFeatures &right, 
 			continue;
 		const cv::Point2f pt = left.keypoints[i].pt;
 		const float d = search_row(left_grey, right_grey, pt, params, buffers);
-		if (!(d >= static_cast<float>(params.min_disparity_px)) ||
-		    d > static_cast<float>(params.max_disparity_px))
+		if (!store_depth(i, pt, d, rig, params, out))
 			continue;
-		const auto p = rig.triangulate(pt.x, pt.y, d);
-		if (!p)
-			continue;
-		out.disparity[i] = d;
-		out.xyz[i] = cv::Vec3f(static_cast<float>((*p)[0]), static_cast<float>((*p)[1]),
-				       static_cast<float>((*p)[2]));
 		if (!descriptors)
 			out.row_differences.push_back(
 				row_offset(left_grey, right_grey, pt, d, params.window_radius_px));
