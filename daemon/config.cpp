@@ -508,10 +508,15 @@ const std::vector<Option> &options()
 			boolean("stereo", "row_search",
 				"look for unmatched left keypoints along their row of the right image (correlation)",
 				[](DaemonConfig &c) -> bool & { return c.motion.stereo.row_search; }));
-		o.push_back(
-			boolean("stereo", "right_features",
-				"match the right eye's own features (seed 002); false: the row search alone, faster",
-				[](DaemonConfig &c) -> bool & { return c.motion.stereo.right_features; }));
+		o.push_back(boolean(
+			"stereo", "right_features",
+			"match the right eye's own features (seed 002) every frame; false: the row search, faster",
+			[](DaemonConfig &c) -> bool & { return c.motion.stereo.right_features; }));
+		o.push_back(number(
+			"stereo", "health_every_frames",
+			"right_features off: match the right eye's features every this many frames for the rig's "
+			"health (0 = never)",
+			[](DaemonConfig &c) -> int & { return c.motion.stereo.health_every_frames; }, 0, 100000));
 		o.push_back(number(
 			"stereo", "row_search_min_ncc", "correlation a row-search match needs",
 			[](DaemonConfig &c) -> double & { return c.motion.stereo.row_search_min_ncc; }, 0, 1));
@@ -525,6 +530,12 @@ const std::vector<Option> &options()
 		// [ego]: the camera's motion from stereo (core/vision/ego.hpp)
 		o.push_back(boolean("ego", "enabled", "estimate the metric pose when the source has depth",
 				    [](DaemonConfig &c) -> bool & { return c.motion.ego.enabled; }));
+		o.push_back(boolean("ego", "anchor_refine",
+				    "refine the chained pose against the anchored static points in view",
+				    [](DaemonConfig &c) -> bool & { return c.motion.ego.anchor_refine; }));
+		o.push_back(number(
+			"ego", "anchor_refine_min_points", "anchored points the refinement needs",
+			[](DaemonConfig &c) -> int & { return c.motion.ego.anchor_refine_min_points; }, 3, 100000));
 		o.push_back(number(
 			"ego", "ransac_threshold_px", "PnP RANSAC inlier distance",
 			[](DaemonConfig &c) -> double & { return c.motion.ego.ransac_threshold_px; }, 0.1, 50));

@@ -199,15 +199,20 @@ int main(int argc, char **argv)
 	std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
 	row("spine only (vision off)", run(config, Path::Spine, seconds, workers));
 	row("ORB + seed-000 (left eye)", run(config, Path::Mono, seconds, workers));
-	row("stereo: both eyes, pose", run(config, Path::Stereo, seconds, workers));
-	// The stereo stage's other ways (docs/geometry.md): seed 002's descriptor matching alone, and the row
-	// search alone without the right eye's features.
-	vision::StereoParams descriptors_only, rows_only;
+	row("stereo + pose (default)", run(config, Path::Stereo, seconds, workers));
+	// The stereo stage's other ways (docs/geometry.md): the right eye's features every frame before the row
+	// search (the default until stop 33), seed 002's descriptor matching alone, and the row search without
+	// the health frames' descriptor matching.
+	vision::StereoParams both_every_frame, descriptors_only, rows_only;
+	both_every_frame.right_features = true;
+	descriptors_only.right_features = true;
 	descriptors_only.row_search = false;
-	rows_only.right_features = false;
+	rows_only.health_every_frames = 0;
+	row("stereo, right features + rows",
+	    run(config, Path::Stereo, seconds, workers, Publish::None, vision::GroupFlow::Sparse, both_every_frame));
 	row("stereo, descriptors only",
 	    run(config, Path::Stereo, seconds, workers, Publish::None, vision::GroupFlow::Sparse, descriptors_only));
-	row("stereo, row search only",
+	row("stereo, rows, no health frame",
 	    run(config, Path::Stereo, seconds, workers, Publish::None, vision::GroupFlow::Sparse, rows_only));
 	if (with_flow) {
 		row("stereo, groups.flow = lk",

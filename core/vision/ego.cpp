@@ -443,4 +443,68 @@ GeometricTest geometric_test(const GeometricContext &context, cv::Point2f prev_p
 	return test;
 }
 
+AnchorRefinement refine_against_anchors(std::span<const cv::Vec3f> anchors_world, std::span<const cv::Point2f> px,
+					const geometry::Pose &world_from_camera, const geometry::StereoRig &rig,
+					const EgoParams &params)
+{
+	AnchorRefinement out;
+	out.world_from_camera = world_from_camera;
+	std::vector<cv::Point3f> object;
+	std::vector<cv::Point2f> image;
+	object.reserve(anchors_world.size());
+	image.reserve(anchors_world.size());
+	for (size_t i = 0; i < anchors_world.size() && i < px.size(); ++i)
+		if (std::isfinite(anchors_world[i][0]) && std::isfinite(anchors_world[i][2])) {
+			object.emplace_back(anchors_world[i][0], anchors_world[i][1], anchors_world[i][2]);
+			image.push_back(px[i]);
+		}
+	out.points = static_cast<int>(object.size());
+	const geometry::Pose chained = world_from_camera.inverse(); // camera_from_world
+	double rms = 0;
+	std::vector<int> inliers = inliers_of(object, image, rig, chained, params.ransac_threshold_px, rms);
+	if (static_cast<int>(inliers.size()) < params.anchor_refine_min_points)
+		return out;
+	const std::vector<int> first = inliers;
+	const cv::Matx33d k = rig.k();
+	cv::Mat rvec = cv::Mat(geometry::vector_from_rotation(chained.r)).clone();
+	cv::Mat tvec = cv::Mat(chained.t).clone();
+	for (int round = 0; round < 2; ++round) {
+		std::vector<cv::Point3f> in_object;
+		std::vector<cv::Point2f> in_image;
+		for (int i : inliers) {
+			in_object.push_back(object[static_cast<size_t>(i)]);
+			in_image.push_back(image[static_cast<size_t>(i)]);
+		}
+		cv::Mat r = rvec.clone(), t = tvec.clone();
+		cv::solvePnPRefineLM(in_object, in_image, k, cv::noArray(), r, t);
+		std::vector<int> support =
+			inliers_of(object, image, rig, pose_of(r, t), params.ransac_threshold_px, rms);
+		if (static_cast<int>(support.size()) < params.anchor_refine_min_points)
+			break;
+		rvec = r, tvec = t;
+		inliers = std::move(support);
+	}
+	const geometry::Pose refined = pose_of(rvec, tvec);
+	// Compared over the chained pose's inliers, so a refinement cannot win by dropping points.
+	const auto rms_over = [&](const geometry::Pose &pose) {
+		double sum2 = 0;
+		for (int i : first)
+			sum2 += std::min(error2(object, image, static_cast<size_t>(i), rig, pose),
+					 params.ransac_threshold_px * params.ransac_threshold_px);
+		return std::sqrt(sum2 / static_cast<double>(first.size()));
+	};
+	out.rms_before_px = rms_over(chained);
+	out.rms_after_px = rms_over(refined);
+	out.inliers = static_cast<int>(inliers.size());
+	const geometry::Pose correction = refined * world_from_camera; // identity when nothing changed
+	const double turn_rad = cv::norm(geometry::vector_from_rotation(correction.r));
+	constexpr double kMaxCorrectionM = 0.05, kMaxCorrectionRad = 1.0 * std::numbers::pi / 180;
+	if (!(out.rms_after_px < out.rms_before_px) || !(cv::norm(correction.t) <= kMaxCorrectionM) ||
+	    !(turn_rad <= kMaxCorrectionRad))
+		return out;
+	out.applied = true;
+	out.world_from_camera = refined.inverse();
+	return out;
+}
+
 } // namespace stereod::vision

@@ -46,7 +46,17 @@ struct EgoParams {
 	/// A fixed sigma is either loose on clean footage (a walker keeping pace passes) or tight on rough
 	/// footage (false alarms); the measured one follows the footage. Never below `min_pixel_sigma_px`.
 	bool measured_noise = true;
-	double min_pixel_sigma_px = 0.1; ///< floor of the measured noise, per axis (sub-pixel matching's limit)
+	/// The local refinement: after chaining, the pose in the world is refined against the anchored static
+	/// points in view (their world positions averaged over the first frames of their tracks, up to
+	/// anchor_max_frames old), so the chain's error grows per anchor, not per frame
+	/// (refine_against_anchors). Needs anchor_min_frames > 0. Off: it lowers the ATE where the camera
+	/// stands or sways (the sim's `toward` 4.5 -> 0.15 cm) but makes every frame's motion noisier (RPE 2-10x)
+	/// and the walk's drift worse (0.32 -> 0.76 %): an anchor's depth error, harmless seen from the next
+	/// frame, grows in pixels as the camera moves away from where it was measured, and the refinement weighs
+	/// every anchor alike (docs/geometry.md).
+	bool anchor_refine = false;
+	int anchor_refine_min_points = 30; ///< anchored points the refinement needs within the RANSAC threshold
+	double min_pixel_sigma_px = 0.1;   ///< floor of the measured noise, per axis (sub-pixel matching's limit)
 	/// With measured noise, the depth terms' disparity noise is measured too (the pose's inliers' predicted
 	/// against measured disparity), never below this.
 	double min_disparity_sigma_px = 0.05;
@@ -124,6 +134,25 @@ struct PoseEstimate {
 PoseEstimate estimate_pose(std::span<const cv::Vec3f> prev_xyz, std::span<const cv::Point2f> cur_px,
 			   std::span<const uint8_t> votes, const geometry::StereoRig &rig, const EgoParams &params,
 			   const MotionPrior *prior = nullptr);
+
+/// The local refinement's outcome (EgoParams::anchor_refine).
+struct AnchorRefinement {
+	bool applied = false;
+	geometry::Pose world_from_camera; ///< refined when applied, else the input
+	int points = 0;			  ///< anchored points offered
+	int inliers = 0;		  ///< within the RANSAC threshold after the refinement
+	double rms_before_px = 0;	  ///< over those inliers, with the chained pose
+	double rms_after_px = 0;
+};
+
+/// The camera's pose in the world (`world_from_camera`, chained frame to frame) refined by Levenberg-Marquardt
+/// against `anchors_world` seen at `px` (index-aligned): the points within the RANSAC threshold of the
+/// chained pose, twice with the inliers re-selected. Kept only when at least `anchor_refine_min_points`
+/// stay inliers, their RMS falls, and the correction stays under 5 cm and 1 degree (a larger one means the
+/// anchors disagree with the chain for another reason than its slow drift, a mover among them).
+AnchorRefinement refine_against_anchors(std::span<const cv::Vec3f> anchors_world, std::span<const cv::Point2f> px,
+					const geometry::Pose &world_from_camera, const geometry::StereoRig &rig,
+					const EgoParams &params);
 
 struct GeometricTest {
 	int dof = 0;		 ///< terms evaluated: 0 = no test possible

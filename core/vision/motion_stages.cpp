@@ -236,7 +236,7 @@ FrameFeatures extract_stage(const StereoFrame &frame, const MotionParams &params
 	StageTimer timer(timing, "stereo");
 	const cv::Mat right_grey = grey_of(frame.right);
 	const FrameFeatures right =
-		params.stereo.right_features
+		right_features_wanted(params.stereo, frame.sequence)
 			? extract_features(frame.right, params.features, params.classifier.colour_radius, &right_grey)
 			: FrameFeatures{};
 	const double scale_step = params.features.detector == Detector::Orb ? params.features.orb_scale : 1.4;
@@ -458,8 +458,37 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 						  ? *prev_tracks->world_from_camera
 						  : geometry::Pose{};
 	const bool moved = pose && pose->valid;
-	const geometry::Pose prev_from_curr = moved ? pose->curr_from_prev.inverse() : geometry::Pose{};
-	const geometry::Pose world_from_curr = world_prev * prev_from_curr;
+	geometry::Pose prev_from_curr = moved ? pose->curr_from_prev.inverse() : geometry::Pose{};
+	geometry::Pose world_from_curr = world_prev * prev_from_curr;
+	if (moved && params.ego.anchor_refine && params.ego.anchor_min_frames > 0 &&
+	    params.label_method != LabelMethod::Seed000) {
+		// The local refinement: the anchored static points in view, each where its track first put it in
+		// the world, pull the chained pose back (refine_against_anchors). Only points nothing calls moving
+		// and whose anchor has settled take part; the anchored test below then runs with the refined pose.
+		StageTimer refine_timer(result.timing, "refine");
+		std::vector<cv::Vec3f> anchors;
+		std::vector<cv::Point2f> anchors_px;
+		for (size_t i = 0; i < n; ++i) {
+			const auto c = static_cast<size_t>(matches[i].cur);
+			if (c >= tracks.by_keypoint.size())
+				continue;
+			const TrackState &state = tracks.by_keypoint[c];
+			if (std::isnan(state.anchor_world[0]) ||
+			    state.anchor_age < static_cast<uint32_t>(params.ego.anchor_min_frames) ||
+			    classification.labels[i] == PointLabel::Dynamic || known_moving[i] != 0 ||
+			    (i < failed.size() && failed[i] != 0) ||
+			    flagged_before(prev_tracks, static_cast<size_t>(matches[i].prev)))
+				continue;
+			anchors.push_back(state.anchor_world);
+			anchors_px.push_back(pairs[i].cur);
+		}
+		const AnchorRefinement refined =
+			refine_against_anchors(anchors, anchors_px, world_from_curr, *params.rig, params.ego);
+		if (refined.applied) {
+			world_from_curr = refined.world_from_camera;
+			prev_from_curr = world_prev.inverse() * world_from_curr;
+		}
+	}
 	// Per match: made dynamic by the anchored test's finds beside it (for the output only, like a group's
 	// label: a wrong spread cannot feed back into the pose or keep a track from being anchored).
 	std::vector<uint8_t> spread;

@@ -194,6 +194,10 @@ void CalibrationHealth::add(const StereoSummary &frame)
 {
 	if (frame.matched < 10 || !std::isfinite(frame.median_row_diff_px))
 		return; // too few matches to say anything about the rig
+	if (frame.candidates > 0)
+		descriptor_frames_ = true;
+	else if (descriptor_frames_)
+		return; // the row search alone, while descriptor matches measure the rig every few frames
 	++frames_;
 	const double weight = 1.0 / static_cast<double>(std::min<uint64_t>(frames_, static_cast<uint64_t>(window_)));
 	const double outside = frame.candidates > 0 ? static_cast<double>(frame.outside_band) / frame.candidates : 0;

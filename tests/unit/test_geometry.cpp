@@ -187,6 +187,56 @@ TEST(Geometry, PnpRecoversAKnownPoseDespiteOutliers)
 	EXPECT_NE(few.reason.find("only 5"), std::string::npos);
 }
 
+TEST(Geometry, LocalRefinementPullsADriftedChainBackToTheAnchors)
+{
+	// 120 anchored points 3-12 m ahead; the camera truly 1.5 m along z and turned 3 degrees about y. The
+	// chain has drifted 2 cm sideways and 0.3 degrees.
+	cv::RNG rng(7);
+	geometry::Pose world_from_true;
+	world_from_true.r = geometry::rotation_from_vector(cv::Vec3d(0, 3.0 * CV_PI / 180, 0));
+	world_from_true.t = cv::Vec3d(0.1, 0, 1.5);
+	const geometry::Pose true_from_world = world_from_true.inverse();
+	std::vector<cv::Vec3f> anchors;
+	std::vector<cv::Point2f> px;
+	while (anchors.size() < 120) {
+		const cv::Vec3d world(rng.uniform(-4.0, 4.0), rng.uniform(-2.0, 2.0), rng.uniform(4.5, 13.5));
+		const auto p = kRig.project(true_from_world * world);
+		if (!p || p->x < 0 || p->y < 0 || p->x >= 640 || p->y >= 480)
+			continue;
+		anchors.emplace_back(world);
+		px.emplace_back(static_cast<float>(p->x + rng.gaussian(0.2)),
+				static_cast<float>(p->y + rng.gaussian(0.2)));
+	}
+	geometry::Pose drift;
+	drift.r = geometry::rotation_from_vector(cv::Vec3d(0, 0.3 * CV_PI / 180, 0));
+	drift.t = cv::Vec3d(0.02, 0, 0);
+	const geometry::Pose chained = world_from_true * drift;
+	EgoParams params;
+	params.ransac_threshold_px = 8; // the drift moves the points by up to ~6 px
+	const AnchorRefinement refined = refine_against_anchors(anchors, px, chained, kRig, params);
+	ASSERT_TRUE(refined.applied);
+	EXPECT_EQ(refined.points, 120);
+	EXPECT_GE(refined.inliers, 115);
+	EXPECT_LT(refined.rms_after_px, refined.rms_before_px);
+	const geometry::Pose error = refined.world_from_camera.inverse() * world_from_true;
+	EXPECT_LT(cv::norm(error.t), 0.003);
+	EXPECT_LT(cv::norm(geometry::vector_from_rotation(error.r)), 0.05 * CV_PI / 180);
+
+	// Too few anchors: the chain stays as it is.
+	params.anchor_refine_min_points = 121;
+	const AnchorRefinement refused = refine_against_anchors(anchors, px, chained, kRig, params);
+	EXPECT_FALSE(refused.applied);
+	EXPECT_LT(cv::norm((refused.world_from_camera.inverse() * chained).t), 1e-12);
+
+	// A correction beyond 5 cm is not the chain's slow drift: refused.
+	drift.r = cv::Matx33d::eye();
+	drift.t = cv::Vec3d(0, 0, 0.3); // 30 cm along the view axis moves far points by little
+	params.anchor_refine_min_points = 30;
+	const AnchorRefinement leap = refine_against_anchors(anchors, px, world_from_true * drift, kRig, params);
+	EXPECT_FALSE(leap.applied);
+	EXPECT_GE(leap.inliers, 30); // refused by the bound, not for want of points
+}
+
 TEST(Geometry, RansacTakesTheSpreadOutSceneOverALargerCompactMover)
 {
 	// 100 static points spread over the image at 2-22 m, and 150 points on a mover: a compact patch 60 px
@@ -404,6 +454,11 @@ TEST(Stereo, MatchesConstructedPairAndMeasuresDepthAndRowHealth)
 	// The row search assumes the rows agree; 2.3 rows off, its correlation and two-way check refuse (0 here)
 	// rather than give depths from the wrong row.
 	EXPECT_LE(bumped.row_searched, 5);
+	// The row search alone (the default between health frames) has next to nothing to measure the rig by:
+	// too few matches for CalibrationHealth to take the frame.
+	const StereoDepth rows_only =
+		match_stereo(lf, FrameFeatures{}, left, dropped, kRig, StereoParams{}, fp.orb_scale);
+	EXPECT_LT(rows_only.matched, 10);
 }
 
 TEST(Stereo, SearchesTheRowWhereTheRightEyeHasNoKeypoint)
@@ -507,6 +562,42 @@ TEST(Stereo, CalibrationHealthWarnsPastHalfAPixel)
 	const uint64_t before = health.frames();
 	health.add(StereoSummary{500, 3, 5, 0, 4.0F});
 	EXPECT_EQ(health.frames(), before);
+}
+
+TEST(Stereo, RowSearchAloneMatchesTheRightFeaturesEveryFewFramesForTheRigsHealth)
+{
+	StereoParams params; // the default: the row search alone, descriptors every 30th frame
+	EXPECT_FALSE(params.right_features);
+	EXPECT_TRUE(right_features_wanted(params, 0));
+	EXPECT_FALSE(right_features_wanted(params, 1));
+	EXPECT_FALSE(right_features_wanted(params, 29));
+	EXPECT_TRUE(right_features_wanted(params, 60));
+	params.health_every_frames = 0;
+	EXPECT_FALSE(right_features_wanted(params, 0));
+	params.right_features = true;
+	EXPECT_TRUE(right_features_wanted(params, 7));
+
+	// A rig bumped by 2.3 rows: the row search's few survivors sit on vertical edges and measure no offset,
+	// the descriptor frames measure the bump. Once descriptor frames are seen, only they count.
+	CalibrationHealth health(30);
+	const StereoSummary rows_only{500, 40, 0, 0, 0.0F};
+	const StereoSummary descriptors{500, 200, 320, 150, -2.3F};
+	for (int second = 0; second < 40; ++second) {
+		health.add(descriptors);
+		for (int i = 1; i < 30; ++i)
+			health.add(rows_only);
+	}
+	EXPECT_TRUE(health.drifted());
+	EXPECT_NEAR(health.row_diff_px(), -2.3, 1e-6);
+	EXPECT_NEAR(health.outside_band_fraction(), 150.0 / 320, 1e-9);
+	EXPECT_EQ(health.frames(), 40U);
+
+	// Without descriptor frames the row search's offsets are all there is (a 0.6-row drop still shows).
+	CalibrationHealth rows_alone(30);
+	for (int i = 0; i < 40; ++i)
+		rows_alone.add(StereoSummary{500, 300, 0, 0, -0.6F});
+	EXPECT_TRUE(rows_alone.drifted());
+	EXPECT_DOUBLE_EQ(rows_alone.outside_band_fraction(), 0);
 }
 
 namespace {
