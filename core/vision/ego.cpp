@@ -96,6 +96,38 @@ geometry::Pose pose_of(const cv::Mat &rvec, const cv::Mat &tvec)
 	return pose;
 }
 
+/// Levenberg-Marquardt on the inliers of `start`, then the inliers again with the refined pose, and once more.
+/// A round whose pose `keep` refuses, or that leaves fewer than `min_inliers`, is not taken. Returns the pose;
+/// `inliers` are its inliers as last selected.
+template <typename Keep>
+geometry::Pose refine_on_inliers(const std::vector<cv::Point3f> &object, const std::vector<cv::Point2f> &image,
+				 const geometry::StereoRig &rig, const geometry::Pose &start, double threshold_px,
+				 int min_inliers, Keep keep, std::vector<int> &inliers)
+{
+	cv::Mat rvec = cv::Mat(geometry::vector_from_rotation(start.r)).clone();
+	cv::Mat tvec = cv::Mat(start.t).clone();
+	for (int round = 0; round < 2; ++round) {
+		std::vector<cv::Point3f> in_object;
+		std::vector<cv::Point2f> in_image;
+		for (int i : inliers) {
+			in_object.push_back(object[static_cast<size_t>(i)]);
+			in_image.push_back(image[static_cast<size_t>(i)]);
+		}
+		cv::Mat r = rvec.clone(), t = tvec.clone();
+		cv::solvePnPRefineLM(in_object, in_image, rig.k(), cv::noArray(), r, t);
+		const geometry::Pose refined = pose_of(r, t);
+		if (!keep(refined))
+			break;
+		double rms = 0;
+		std::vector<int> support = inliers_of(object, image, rig, refined, threshold_px, rms);
+		if (static_cast<int>(support.size()) < min_inliers)
+			break;
+		rvec = r, tvec = t;
+		inliers = std::move(support);
+	}
+	return pose_of(rvec, tvec);
+}
+
 } // namespace
 
 double chi2_quantile(int dof, double p)
@@ -254,29 +286,9 @@ PoseEstimate estimate_pose(std::span<const cv::Vec3f> prev_xyz, std::span<const 
 			     (prior != nullptr ? " within the acceleration bounds" : "");
 		return out;
 	}
-	// Levenberg-Marquardt on the inliers, then the inliers again with the refined pose, and once more. A
-	// refinement that leaves the bounds (it slid towards a mover among the inliers) is not taken.
-	cv::Mat rvec = cv::Mat(geometry::vector_from_rotation(best.r)).clone();
-	cv::Mat tvec = cv::Mat(best.t).clone();
-	for (int round = 0; round < 2; ++round) {
-		std::vector<cv::Point3f> in_object;
-		std::vector<cv::Point2f> in_image;
-		for (int i : inliers) {
-			in_object.push_back(object[static_cast<size_t>(i)]);
-			in_image.push_back(image[static_cast<size_t>(i)]);
-		}
-		cv::Mat r = rvec.clone(), t = tvec.clone();
-		cv::solvePnPRefineLM(in_object, in_image, k, cv::noArray(), r, t);
-		const geometry::Pose refined = pose_of(r, t);
-		if (!plausible(refined))
-			break;
-		std::vector<int> support = inliers_of(object, image, rig, refined, params.ransac_threshold_px, rms);
-		if (static_cast<int>(support.size()) < params.min_inliers)
-			break;
-		rvec = r, tvec = t;
-		inliers = std::move(support);
-	}
-	out.curr_from_prev = pose_of(rvec, tvec);
+	// A refinement that leaves the bounds (it slid towards a mover among the inliers) is not taken.
+	out.curr_from_prev = refine_on_inliers(object, image, rig, best, params.ransac_threshold_px, params.min_inliers,
+					       plausible, inliers);
 	inliers = inliers_of(object, image, rig, out.curr_from_prev, params.ransac_threshold_px, rms);
 	out.inliers = static_cast<int>(inliers.size());
 	out.rms_px = rms;
@@ -465,26 +477,9 @@ AnchorRefinement refine_against_anchors(std::span<const cv::Vec3f> anchors_world
 	if (static_cast<int>(inliers.size()) < params.anchor_refine_min_points)
 		return out;
 	const std::vector<int> first = inliers;
-	const cv::Matx33d k = rig.k();
-	cv::Mat rvec = cv::Mat(geometry::vector_from_rotation(chained.r)).clone();
-	cv::Mat tvec = cv::Mat(chained.t).clone();
-	for (int round = 0; round < 2; ++round) {
-		std::vector<cv::Point3f> in_object;
-		std::vector<cv::Point2f> in_image;
-		for (int i : inliers) {
-			in_object.push_back(object[static_cast<size_t>(i)]);
-			in_image.push_back(image[static_cast<size_t>(i)]);
-		}
-		cv::Mat r = rvec.clone(), t = tvec.clone();
-		cv::solvePnPRefineLM(in_object, in_image, k, cv::noArray(), r, t);
-		std::vector<int> support =
-			inliers_of(object, image, rig, pose_of(r, t), params.ransac_threshold_px, rms);
-		if (static_cast<int>(support.size()) < params.anchor_refine_min_points)
-			break;
-		rvec = r, tvec = t;
-		inliers = std::move(support);
-	}
-	const geometry::Pose refined = pose_of(rvec, tvec);
+	const geometry::Pose refined = refine_on_inliers(
+		object, image, rig, chained, params.ransac_threshold_px, params.anchor_refine_min_points,
+		[](const geometry::Pose &) { return true; }, inliers);
 	// Compared over the chained pose's inliers, so a refinement cannot win by dropping points.
 	const auto rms_over = [&](const geometry::Pose &pose) {
 		double sum2 = 0;
