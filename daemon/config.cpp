@@ -537,6 +537,9 @@ const std::vector<Option> &options()
 			"ego", "anchor_refine_min_points", "anchored points the refinement needs",
 			[](DaemonConfig &c) -> int & { return c.motion.ego.anchor_refine_min_points; }, 3, 100000));
 		o.push_back(number(
+			"ego", "anchor_refine_gain", "share of the refinement's correction applied per frame",
+			[](DaemonConfig &c) -> double & { return c.motion.ego.anchor_refine_gain; }, 0.01, 1));
+		o.push_back(number(
 			"ego", "ransac_threshold_px", "PnP RANSAC inlier distance",
 			[](DaemonConfig &c) -> double & { return c.motion.ego.ransac_threshold_px; }, 0.1, 50));
 		o.push_back(number(

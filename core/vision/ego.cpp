@@ -455,23 +455,27 @@ GeometricTest geometric_test(const GeometricContext &context, cv::Point2f prev_p
 	return test;
 }
 
-AnchorRefinement refine_against_anchors(std::span<const cv::Vec3f> anchors_world, std::span<const cv::Point2f> px,
-					const geometry::Pose &world_from_camera, const geometry::StereoRig &rig,
-					const EgoParams &params)
+AnchorRefinement refine_against_anchors(std::span<const AnchorView> anchors, const geometry::Pose &world_from_camera,
+					const geometry::StereoRig &rig, const EgoParams &params)
 {
 	AnchorRefinement out;
 	out.world_from_camera = world_from_camera;
+	const geometry::Pose chained = world_from_camera.inverse(); // camera_from_world
 	std::vector<cv::Point3f> object;
 	std::vector<cv::Point2f> image;
-	object.reserve(anchors_world.size());
-	image.reserve(anchors_world.size());
-	for (size_t i = 0; i < anchors_world.size() && i < px.size(); ++i)
-		if (std::isfinite(anchors_world[i][0]) && std::isfinite(anchors_world[i][2])) {
-			object.emplace_back(anchors_world[i][0], anchors_world[i][1], anchors_world[i][2]);
-			image.push_back(px[i]);
-		}
+	object.reserve(anchors.size());
+	image.reserve(anchors.size());
+	for (const AnchorView &anchor : anchors) {
+		const cv::Vec3d world(anchor.world[0], anchor.world[1], anchor.world[2]);
+		if (!std::isfinite(world[0]) || !std::isfinite(world[2]))
+			continue;
+		const cv::Vec3d p = chained * world;
+		if (!(p[2] > 0))
+			continue;
+		object.emplace_back(anchor.world[0], anchor.world[1], anchor.world[2]);
+		image.push_back(anchor.px);
+	}
 	out.points = static_cast<int>(object.size());
-	const geometry::Pose chained = world_from_camera.inverse(); // camera_from_world
 	double rms = 0;
 	std::vector<int> inliers = inliers_of(object, image, rig, chained, params.ransac_threshold_px, rms);
 	if (static_cast<int>(inliers.size()) < params.anchor_refine_min_points)
@@ -498,7 +502,13 @@ AnchorRefinement refine_against_anchors(std::span<const cv::Vec3f> anchors_world
 	    !(turn_rad <= kMaxCorrectionRad))
 		return out;
 	out.applied = true;
-	out.world_from_camera = refined.inverse();
+	// The step from the chained pose to the refined one, in this camera (refined = step * chained), and the
+	// share of it applied.
+	const geometry::Pose step = refined * chained.inverse();
+	geometry::Pose part;
+	part.r = geometry::rotation_from_vector(params.anchor_refine_gain * geometry::vector_from_rotation(step.r));
+	part.t = params.anchor_refine_gain * step.t;
+	out.world_from_camera = (part * chained).inverse();
 	return out;
 }
 

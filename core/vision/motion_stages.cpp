@@ -466,8 +466,7 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 		// the world, pull the chained pose back (refine_against_anchors). Only points nothing calls moving
 		// and whose anchor has settled take part; the anchored test below then runs with the refined pose.
 		StageTimer refine_timer(result.timing, "refine");
-		std::vector<cv::Vec3f> anchors;
-		std::vector<cv::Point2f> anchors_px;
+		std::vector<AnchorView> anchors;
 		for (size_t i = 0; i < n; ++i) {
 			const auto c = static_cast<size_t>(matches[i].cur);
 			if (c >= tracks.by_keypoint.size())
@@ -479,11 +478,10 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 			    (i < failed.size() && failed[i] != 0) ||
 			    flagged_before(prev_tracks, static_cast<size_t>(matches[i].prev)))
 				continue;
-			anchors.push_back(state.anchor_world);
-			anchors_px.push_back(pairs[i].cur);
+			anchors.push_back({state.anchor_world, pairs[i].cur});
 		}
 		const AnchorRefinement refined =
-			refine_against_anchors(anchors, anchors_px, world_from_curr, *params.rig, params.ego);
+			refine_against_anchors(anchors, world_from_curr, *params.rig, params.ego);
 		if (refined.applied) {
 			world_from_curr = refined.world_from_camera;
 			prev_from_curr = world_prev.inverse() * world_from_curr;

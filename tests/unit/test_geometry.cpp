@@ -196,16 +196,14 @@ TEST(Geometry, LocalRefinementPullsADriftedChainBackToTheAnchors)
 	world_from_true.r = geometry::rotation_from_vector(cv::Vec3d(0, 3.0 * CV_PI / 180, 0));
 	world_from_true.t = cv::Vec3d(0.1, 0, 1.5);
 	const geometry::Pose true_from_world = world_from_true.inverse();
-	std::vector<cv::Vec3f> anchors;
-	std::vector<cv::Point2f> px;
+	std::vector<AnchorView> anchors;
 	while (anchors.size() < 120) {
 		const cv::Vec3d world(rng.uniform(-4.0, 4.0), rng.uniform(-2.0, 2.0), rng.uniform(4.5, 13.5));
 		const auto p = kRig.project(true_from_world * world);
 		if (!p || p->x < 0 || p->y < 0 || p->x >= 640 || p->y >= 480)
 			continue;
-		anchors.emplace_back(world);
-		px.emplace_back(static_cast<float>(p->x + rng.gaussian(0.2)),
-				static_cast<float>(p->y + rng.gaussian(0.2)));
+		anchors.push_back({cv::Vec3f(world), cv::Point2f(static_cast<float>(p->x + rng.gaussian(0.2)),
+								 static_cast<float>(p->y + rng.gaussian(0.2)))});
 	}
 	geometry::Pose drift;
 	drift.r = geometry::rotation_from_vector(cv::Vec3d(0, 0.3 * CV_PI / 180, 0));
@@ -213,7 +211,8 @@ TEST(Geometry, LocalRefinementPullsADriftedChainBackToTheAnchors)
 	const geometry::Pose chained = world_from_true * drift;
 	EgoParams params;
 	params.ransac_threshold_px = 8; // the drift moves the points by up to ~6 px
-	const AnchorRefinement refined = refine_against_anchors(anchors, px, chained, kRig, params);
+	params.anchor_refine_gain = 1;	// the whole correction at once
+	const AnchorRefinement refined = refine_against_anchors(anchors, chained, kRig, params);
 	ASSERT_TRUE(refined.applied);
 	EXPECT_EQ(refined.points, 120);
 	EXPECT_GE(refined.inliers, 115);
@@ -222,9 +221,17 @@ TEST(Geometry, LocalRefinementPullsADriftedChainBackToTheAnchors)
 	EXPECT_LT(cv::norm(error.t), 0.003);
 	EXPECT_LT(cv::norm(geometry::vector_from_rotation(error.r)), 0.05 * CV_PI / 180);
 
+	// Half the correction with anchor_refine_gain 0.5.
+	params.anchor_refine_gain = 0.5;
+	const AnchorRefinement half = refine_against_anchors(anchors, chained, kRig, params);
+	ASSERT_TRUE(half.applied);
+	const geometry::Pose half_error = half.world_from_camera.inverse() * world_from_true;
+	EXPECT_NEAR(cv::norm(half_error.t), cv::norm((chained.inverse() * world_from_true).t) / 2, 0.003);
+	params.anchor_refine_gain = 1;
+
 	// Too few anchors: the chain stays as it is.
 	params.anchor_refine_min_points = 121;
-	const AnchorRefinement refused = refine_against_anchors(anchors, px, chained, kRig, params);
+	const AnchorRefinement refused = refine_against_anchors(anchors, chained, kRig, params);
 	EXPECT_FALSE(refused.applied);
 	EXPECT_LT(cv::norm((refused.world_from_camera.inverse() * chained).t), 1e-12);
 
@@ -232,7 +239,7 @@ TEST(Geometry, LocalRefinementPullsADriftedChainBackToTheAnchors)
 	drift.r = cv::Matx33d::eye();
 	drift.t = cv::Vec3d(0, 0, 0.3); // 30 cm along the view axis moves far points by little
 	params.anchor_refine_min_points = 30;
-	const AnchorRefinement leap = refine_against_anchors(anchors, px, world_from_true * drift, kRig, params);
+	const AnchorRefinement leap = refine_against_anchors(anchors, world_from_true * drift, kRig, params);
 	EXPECT_FALSE(leap.applied);
 	EXPECT_GE(leap.inliers, 30); // refused by the bound, not for want of points
 }
