@@ -422,6 +422,24 @@ const std::vector<Option> &options()
 			[](DaemonConfig &c) -> float & { return c.motion.matching.search_radius_px; }, 0, 10000));
 		o.push_back(boolean("matching", "subpixel", "refine matches to a fraction of a pixel (Lucas-Kanade)",
 				    [](DaemonConfig &c) -> bool & { return c.motion.matching.subpixel; }));
+		o.push_back(boolean(
+			"matching", "rescue",
+			"unmatched keypoints followed by Lucas-Kanade and joined to an unmatched one where they land",
+			[](DaemonConfig &c) -> bool & { return c.motion.matching.rescue; }));
+		o.push_back(number(
+			"matching", "rescue_radius_px", "rescue: largest distance from where Lucas-Kanade lands",
+			[](DaemonConfig &c) -> float & { return c.motion.matching.rescue_radius_px; }, 0.1, 10));
+		o.push_back(number(
+			"matching", "rescue_back_px", "rescue: largest round-trip error of Lucas-Kanade",
+			[](DaemonConfig &c) -> float & { return c.motion.matching.rescue_back_px; }, 0.01, 10));
+		o.push_back(number(
+			"matching", "rescue_reach_px",
+			"rescue: followed only with an unmatched keypoint this near its prediction",
+			[](DaemonConfig &c) -> float & { return c.motion.matching.rescue_reach_px; }, 0.1, 100));
+		o.push_back(number(
+			"matching", "rescue_max_distance",
+			"rescue: largest Hamming distance between the two descriptors; 256 = not looked at",
+			[](DaemonConfig &c) -> int & { return c.motion.matching.rescue_max_distance; }, 1, 256));
 		// [classifier]
 		o.push_back(number(
 			"classifier", "ransac_threshold_px", "RANSAC inlier distance, pixels",

@@ -93,7 +93,7 @@ private:
 
 Run run(const drivers::SourceConfig &source_config, Path path, double seconds, size_t workers,
 	Publish publish = Publish::None, vision::GroupFlow flow = vision::GroupFlow::Sparse,
-	const vision::StereoParams &stereo = {})
+	const vision::StereoParams &stereo = {}, const vision::MatchParams &matching = {})
 {
 	std::unique_ptr<daemon::DdsPublisher> dds;
 	std::unique_ptr<Subscriber> subscriber;
@@ -115,6 +115,7 @@ Run run(const drivers::SourceConfig &source_config, Path path, double seconds, s
 		options.motion.rig = source->info().calibration; // both eyes' features, stereo, pose, geometric check
 	options.motion.dense.method = flow; // the groups' members: feature matches, or seed 002's global flow
 	options.motion.stereo = stereo;
+	options.motion.matching = matching;
 	std::mutex m;
 	std::vector<int64_t> latencies;
 	std::map<std::string, double> stages;
@@ -214,6 +215,12 @@ int main(int argc, char **argv)
 	    run(config, Path::Stereo, seconds, workers, Publish::None, vision::GroupFlow::Sparse, descriptors_only));
 	row("stereo, rows, no health frame",
 	    run(config, Path::Stereo, seconds, workers, Publish::None, vision::GroupFlow::Sparse, rows_only));
+	// The temporal matches the descriptors refused, found again by Lucas-Kanade (matching.rescue, on by
+	// default; its cost is in the match column).
+	vision::MatchParams no_rescue;
+	no_rescue.rescue = false;
+	row("stereo + pose, no rescue",
+	    run(config, Path::Stereo, seconds, workers, Publish::None, vision::GroupFlow::Sparse, {}, no_rescue));
 	if (with_flow) {
 		row("stereo, groups.flow = lk",
 		    run(config, Path::Stereo, seconds, workers, Publish::None, vision::GroupFlow::PyrLk));

@@ -38,6 +38,9 @@ struct FrameFeatures {
 	std::optional<StereoSummary> stereo; ///< how the stereo matching went, when it ran
 	/// The left image in grey (owned, not a pool buffer), for sub-pixel refinement of the temporal matches.
 	cv::Mat grey;
+	/// The grey image's Lucas-Kanade pyramid with its derivatives (lk_pyramid, matching.hpp), built in the
+	/// extract stage, which runs beside other frames', so the rescue in the serial pair stage does not build it.
+	std::vector<cv::Mat> grey_pyramid;
 	/// The grey left image scaled for the dense flow (dense_motion.hpp), when the groups use it.
 	cv::Mat flow_image;
 	/// Per cell of the dense flow's grid: the depth from this frame's 3D points (dense_motion.hpp); empty

@@ -212,6 +212,8 @@ private:
 };
 
 /// Descriptors compared by Hamming distance on 64-bit words (ORB); anything else goes by its float norm.
+constexpr int kRescueLevels = 3; ///< pyramid levels of the rescue's Lucas-Kanade
+
 bool binary_descriptors(const FrameFeatures &prev, const FrameFeatures &cur)
 {
 	return cur.norm_type == cv::NORM_HAMMING && prev.descriptors.type() == CV_8U &&
@@ -266,6 +268,145 @@ std::vector<Match> match_features(const FrameFeatures &prev, const FrameFeatures
 	if (binary_descriptors(prev, cur))
 		return match_binary(prev.descriptors, cur.descriptors, params);
 	return match_float(prev.descriptors, cur.descriptors, params, cur.norm_type);
+}
+
+std::vector<cv::Mat> lk_pyramid(const cv::Mat &grey, const MatchParams &params)
+{
+	std::vector<cv::Mat> pyramid;
+	if (!grey.empty())
+		cv::buildOpticalFlowPyramid(grey, pyramid, cv::Size(params.rescue_window_px, params.rescue_window_px),
+					    kRescueLevels - 1, true);
+	return pyramid;
+}
+
+int rescue_matches(const FrameFeatures &prev, const FrameFeatures &cur, std::span<const cv::Point2f> predicted,
+		   std::vector<Match> &matches, const MatchParams &params)
+{
+	if (prev.grey.empty() || cur.grey.empty() || prev.grey.size() != cur.grey.size() || prev.keypoints.empty() ||
+	    cur.keypoints.empty() || prev.descriptors.rows != static_cast<int>(prev.keypoints.size()) ||
+	    cur.descriptors.rows != static_cast<int>(cur.keypoints.size()) ||
+	    prev.descriptors.cols != cur.descriptors.cols || prev.descriptors.type() != cur.descriptors.type())
+		return 0;
+	std::vector<uint8_t> prev_matched(prev.keypoints.size(), 0), cur_matched(cur.keypoints.size(), 0);
+	for (const Match &m : matches) {
+		prev_matched[static_cast<size_t>(m.prev)] = 1;
+		cur_matched[static_cast<size_t>(m.cur)] = 1;
+	}
+	// Only points with an unmatched keypoint near their predicted position can be joined: the rest are not
+	// followed at all (Lucas-Kanade is the cost here, about 30 us a point both ways).
+	const float reach = std::max(params.rescue_reach_px, params.rescue_radius_px);
+	const KeypointGrid near_grid(cur.keypoints, reach);
+	std::vector<int> lost;
+	std::vector<cv::Point2f> from, to;
+	const bool use_prediction = predicted.size() == prev.keypoints.size();
+	for (size_t i = 0; i < prev.keypoints.size(); ++i) {
+		if (prev_matched[i] != 0)
+			continue;
+		const cv::Point2f start = use_prediction ? predicted[i] : prev.keypoints[i].pt;
+		if (!std::isfinite(start.x) || !std::isfinite(start.y))
+			continue;
+		bool free_nearby = false;
+		near_grid.around(start, [&](int j) {
+			const cv::Point2f offset = cur.keypoints[static_cast<size_t>(j)].pt - start;
+			free_nearby = free_nearby ||
+				      (cur_matched[static_cast<size_t>(j)] == 0 && offset.dot(offset) <= reach * reach);
+		});
+		if (!free_nearby)
+			continue;
+		lost.push_back(static_cast<int>(i));
+		from.push_back(prev.keypoints[i].pt);
+		to.push_back(start);
+	}
+	if (lost.empty())
+		return 0;
+	const cv::Size window(params.rescue_window_px, params.rescue_window_px);
+	const cv::TermCriteria stop(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 10, 0.03);
+	const std::vector<cv::Mat> prev_built =
+		prev.grey_pyramid.empty() ? lk_pyramid(prev.grey, params) : std::vector<cv::Mat>{};
+	const std::vector<cv::Mat> cur_built =
+		cur.grey_pyramid.empty() ? lk_pyramid(cur.grey, params) : std::vector<cv::Mat>{};
+	const std::vector<cv::Mat> &prev_pyramid = prev.grey_pyramid.empty() ? prev_built : prev.grey_pyramid;
+	const std::vector<cv::Mat> &cur_pyramid = cur.grey_pyramid.empty() ? cur_built : cur.grey_pyramid;
+	std::vector<uchar> status;
+	std::vector<float> error;
+	cv::calcOpticalFlowPyrLK(prev_pyramid, cur_pyramid, from, to, status, error, window, kRescueLevels - 1, stop,
+				 cv::OPTFLOW_USE_INITIAL_FLOW);
+
+	// The nearest unmatched keypoint where each point landed.
+	const float radius = params.rescue_radius_px;
+	const KeypointGrid grid(cur.keypoints, std::max(radius, 1.0F));
+	struct Candidate {
+		float distance2;
+		int prev, cur;
+		float descriptor_distance;
+	};
+	std::vector<Candidate> candidates;
+	std::vector<cv::Point2f> landed, back;
+	for (size_t k = 0; k < lost.size(); ++k) {
+		if (status[k] == 0 || !std::isfinite(to[k].x) || !std::isfinite(to[k].y))
+			continue;
+		int best = -1;
+		float best2 = radius * radius;
+		grid.around(to[k], [&](int j) {
+			if (cur_matched[static_cast<size_t>(j)] != 0)
+				return;
+			const cv::Point2f offset = cur.keypoints[static_cast<size_t>(j)].pt - to[k];
+			const float d2 = offset.dot(offset);
+			if (d2 <= best2) {
+				best2 = d2;
+				best = j;
+			}
+		});
+		if (best < 0)
+			continue;
+		candidates.push_back({best2, lost[k], best, 0});
+		landed.push_back(to[k]);
+		back.push_back(from[k]);
+	}
+	if (candidates.empty())
+		return 0;
+	// Followed back from where they landed, they must come home: a point that slid along an edge or onto
+	// another surface does not.
+	std::vector<cv::Point2f> home = back;
+	cv::calcOpticalFlowPyrLK(cur_pyramid, prev_pyramid, landed, back, status, error, window, kRescueLevels - 1,
+				 stop, cv::OPTFLOW_USE_INITIAL_FLOW);
+	const bool binary = binary_descriptors(prev, cur);
+	const int words = prev.descriptors.cols / 8;
+	const float back2 = params.rescue_back_px * params.rescue_back_px;
+	size_t kept = 0;
+	for (size_t k = 0; k < candidates.size(); ++k) {
+		const cv::Point2f round_trip = back[k] - home[k];
+		if (status[k] == 0 || !(round_trip.dot(round_trip) <= back2))
+			continue;
+		Candidate c = candidates[k];
+		if (binary) {
+			int bits = 0;
+			const cv::Mat prev_row = prev.descriptors.row(c.prev), cur_row = cur.descriptors.row(c.cur);
+			if (prev_row.isContinuous() && cur_row.isContinuous())
+				hamming_rows(prev_row.ptr<uint64_t>(0), cur_row.ptr<uint64_t>(0), 1, words, &bits);
+			else
+				bits = static_cast<int>(cv::norm(prev_row, cur_row, cv::NORM_HAMMING));
+			if (bits > params.rescue_max_distance)
+				continue;
+			c.descriptor_distance = static_cast<float>(bits);
+		} else {
+			c.descriptor_distance = static_cast<float>(
+				cv::norm(prev.descriptors.row(c.prev), cur.descriptors.row(c.cur), cur.norm_type));
+		}
+		candidates[kept++] = c;
+	}
+	candidates.resize(kept);
+	std::sort(candidates.begin(), candidates.end(),
+		  [](const Candidate &a, const Candidate &b) { return a.distance2 < b.distance2; });
+	int added = 0;
+	for (const Candidate &c : candidates) {
+		if (cur_matched[static_cast<size_t>(c.cur)] != 0)
+			continue;
+		cur_matched[static_cast<size_t>(c.cur)] = 1;
+		matches.push_back({c.prev, c.cur, c.descriptor_distance});
+		++added;
+	}
+	return added;
 }
 
 int refine_matches(const cv::Mat &prev_grey, const cv::Mat &cur_grey, std::span<const cv::Point2f> prev_pts,

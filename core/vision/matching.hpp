@@ -23,6 +23,16 @@ struct MatchParams {
 	bool subpixel = true;
 	int subpixel_window_px = 11;	 ///< LK window side
 	float subpixel_max_shift_px = 2; ///< a refinement moving the point farther is refused (keeps the keypoint)
+	/// Matches found again by the image (rescue_matches): ORB re-detects about two thirds of a frame's corners
+	/// in the next, but the ratio test and cross check refuse a share of those it does, and each refusal ends
+	/// a track (on the sim a track lasted 3.8 frames on average, too short for the tests that need a few).
+	bool rescue = true;
+	float rescue_radius_px = 1.5; ///< the unmatched keypoint must lie this close to where Lucas-Kanade lands
+	float rescue_back_px = 0.5;   ///< and Lucas-Kanade from there back must land this close to the start
+	/// Only keypoints with an unmatched one this close to their predicted position are followed at all.
+	float rescue_reach_px = 8;
+	int rescue_window_px = 9;      ///< LK window side (3 pyramid levels)
+	int rescue_max_distance = 256; ///< Hamming bits between the two descriptors (ORB); 256: not looked at
 };
 
 struct Match {
@@ -39,6 +49,20 @@ std::vector<Match> match_features(const FrameFeatures &prev, const FrameFeatures
 /// non-finite one matches nothing). The cross check runs over the same candidate pairs.
 std::vector<Match> match_features_guided(const FrameFeatures &prev, const FrameFeatures &cur,
 					 std::span<const cv::Point2f> predicted, const MatchParams &params);
+
+/// The Lucas-Kanade pyramid rescue_matches follows points on: 3 levels of `grey` with their derivatives,
+/// bordered for params.rescue_window_px.
+std::vector<cv::Mat> lk_pyramid(const cv::Mat &grey, const MatchParams &params);
+
+/// Matches the descriptor tests refused, found again by the image: each keypoint of `prev` left unmatched by
+/// `matches` is followed into `cur` by pyramidal Lucas-Kanade (on the frames' `grey_pyramid`, else built here) from
+/// `predicted` (its position when empty), checked by following it back (params.rescue_back_px), and joined to the
+/// nearest keypoint of `cur` that is unmatched too, within params.rescue_radius_px of where it landed. Binary
+/// descriptors must also be within params.rescue_max_distance (float ones have no absolute scale; the two-way check and
+/// the radius decide). Each keypoint joins at most once, the closest pairs first. Appends to `matches` and returns how
+/// many it added; nothing without both grey images.
+int rescue_matches(const FrameFeatures &prev, const FrameFeatures &cur, std::span<const cv::Point2f> predicted,
+		   std::vector<Match> &matches, const MatchParams &params);
 
 /// Sub-pixel positions in `cur_grey` of the points `prev_pts` of `prev_grey`, starting from `cur_pts`
 /// (one pyramidal Lucas-Kanade step, seeded): a point LK loses, or moves farther than max_shift_px, keeps its

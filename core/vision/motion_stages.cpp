@@ -201,9 +201,13 @@ FrameFeatures extract_stage(const StereoFrame &frame, const MotionParams &params
 		StageTimer timer(timing, "extract");
 		grey = grey_of(frame.left);
 		features = extract_features(frame.left, params.features, params.classifier.colour_radius, &grey);
-		if (params.matching.subpixel)
+		if (params.matching.subpixel || params.matching.rescue)
 			// A grey frame's image is a pool buffer that the next capture overwrites: keep a copy.
 			features.grey = grey.data == frame.left.data ? grey.clone() : grey;
+	}
+	if (params.matching.rescue) {
+		StageTimer timer(timing, "pyramid");
+		features.grey_pyramid = lk_pyramid(grey, params.matching);
 	}
 	if (params.groups.enabled && params.dense.method != GroupFlow::Sparse) {
 		StageTimer timer(timing, "flow_image");
@@ -286,6 +290,13 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 					       : std::nullopt;
 		matches = predicted ? match_features_guided(*prev, cur, *predicted, params.matching)
 				    : match_features(*prev, cur, params.matching);
+		if (params.matching.rescue) {
+			StageTimer rescue_timer(result.timing, "rescue");
+			rescue_matches(*prev, cur,
+				       predicted ? std::span<const cv::Point2f>(*predicted)
+						 : std::span<const cv::Point2f>(),
+				       matches, params.matching);
+		}
 	}
 	const size_t n = matches.size();
 	std::vector<PointPair> pairs;
