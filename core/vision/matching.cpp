@@ -211,13 +211,41 @@ private:
 	std::vector<int> order_;	   ///< the keypoint index of each sorted key
 };
 
-/// Descriptors compared by Hamming distance on 64-bit words (ORB); anything else goes by its float norm.
 constexpr int kRescueLevels = 3; ///< pyramid levels of the rescue's Lucas-Kanade
 
+/// Descriptors compared by Hamming distance on 64-bit words (ORB); anything else goes by its float norm.
 bool binary_descriptors(const FrameFeatures &prev, const FrameFeatures &cur)
 {
 	return cur.norm_type == cv::NORM_HAMMING && prev.descriptors.type() == CV_8U &&
 	       prev.descriptors.cols % 8 == 0 && prev.descriptors.cols == cur.descriptors.cols;
+}
+
+/// Row i of `prev_d` against row j of `cur_d`: Hamming bits when `binary` (both continuous, see
+/// binary_descriptors), else their `norm_type` distance.
+float descriptor_distance(const cv::Mat &prev_d, int i, const cv::Mat &cur_d, int j, bool binary, int norm_type)
+{
+	if (binary) {
+		int bits = 0;
+		hamming_rows(prev_d.ptr<uint64_t>(i), cur_d.ptr<uint64_t>(j), 1, prev_d.cols / 8, &bits);
+		return static_cast<float>(bits);
+	}
+	return static_cast<float>(cv::norm(prev_d.row(i), cur_d.row(j), norm_type));
+}
+
+/// Rows read as 64-bit words need a continuous matrix; extracted descriptors are, so this rarely copies.
+cv::Mat continuous(const cv::Mat &m)
+{
+	return m.isContinuous() ? m : m.clone();
+}
+
+/// A frame's Lucas-Kanade pyramid: the extract stage's, else one built into `scratch`.
+const std::vector<cv::Mat> &pyramid_of(const FrameFeatures &features, std::vector<cv::Mat> &scratch,
+				       const MatchParams &params)
+{
+	if (!features.grey_pyramid.empty())
+		return features.grey_pyramid;
+	scratch = lk_pyramid(features.grey, params);
+	return scratch;
 }
 
 } // namespace
@@ -234,9 +262,8 @@ std::vector<Match> match_features_guided(const FrameFeatures &prev, const FrameF
 	const KeypointGrid grid(cur.keypoints, radius);
 	CandidateTable<float> table(prev.descriptors.rows, cur.descriptors.rows);
 	const bool binary = binary_descriptors(prev, cur);
-	const cv::Mat prev_d = prev.descriptors.isContinuous() ? prev.descriptors : prev.descriptors.clone();
-	const cv::Mat cur_d = cur.descriptors.isContinuous() ? cur.descriptors : cur.descriptors.clone();
-	const int words = prev_d.cols / 8;
+	const cv::Mat prev_d = continuous(prev.descriptors);
+	const cv::Mat cur_d = continuous(cur.descriptors);
 	for (int i = 0; i < prev_d.rows; ++i) {
 		const cv::Point2f at = predicted[static_cast<size_t>(i)];
 		if (!std::isfinite(at.x) || !std::isfinite(at.y))
@@ -245,15 +272,7 @@ std::vector<Match> match_features_guided(const FrameFeatures &prev, const FrameF
 			const cv::Point2f offset = cur.keypoints[static_cast<size_t>(j)].pt - at;
 			if (offset.dot(offset) > radius2)
 				return;
-			float d = 0;
-			if (binary) {
-				int bits = 0;
-				hamming_rows(prev_d.ptr<uint64_t>(i), cur_d.ptr<uint64_t>(j), 1, words, &bits);
-				d = static_cast<float>(bits);
-			} else {
-				d = static_cast<float>(cv::norm(prev_d.row(i), cur_d.row(j), cur.norm_type));
-			}
-			table.add(i, j, d);
+			table.add(i, j, descriptor_distance(prev_d, i, cur_d, j, binary, cur.norm_type));
 		});
 	}
 	// max_distance is in Hamming bits; float descriptors rely on the ratio test and cross check.
@@ -295,7 +314,8 @@ int rescue_matches(const FrameFeatures &prev, const FrameFeatures &cur, std::spa
 	// Only points with an unmatched keypoint near their predicted position can be joined: the rest are not
 	// followed at all (Lucas-Kanade is the cost here, about 30 us a point both ways).
 	const float reach = std::max(params.rescue_reach_px, params.rescue_radius_px);
-	const KeypointGrid near_grid(cur.keypoints, reach);
+	const KeypointGrid grid(cur.keypoints, reach); // its cells hold both the reach and the radius
+
 	std::vector<int> lost;
 	std::vector<cv::Point2f> from, to;
 	const bool use_prediction = predicted.size() == prev.keypoints.size();
@@ -306,7 +326,7 @@ int rescue_matches(const FrameFeatures &prev, const FrameFeatures &cur, std::spa
 		if (!std::isfinite(start.x) || !std::isfinite(start.y))
 			continue;
 		bool free_nearby = false;
-		near_grid.around(start, [&](int j) {
+		grid.around(start, [&](int j) {
 			const cv::Point2f offset = cur.keypoints[static_cast<size_t>(j)].pt - start;
 			free_nearby = free_nearby ||
 				      (cur_matched[static_cast<size_t>(j)] == 0 && offset.dot(offset) <= reach * reach);
@@ -321,12 +341,9 @@ int rescue_matches(const FrameFeatures &prev, const FrameFeatures &cur, std::spa
 		return 0;
 	const cv::Size window(params.rescue_window_px, params.rescue_window_px);
 	const cv::TermCriteria stop(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 10, 0.03);
-	const std::vector<cv::Mat> prev_built =
-		prev.grey_pyramid.empty() ? lk_pyramid(prev.grey, params) : std::vector<cv::Mat>{};
-	const std::vector<cv::Mat> cur_built =
-		cur.grey_pyramid.empty() ? lk_pyramid(cur.grey, params) : std::vector<cv::Mat>{};
-	const std::vector<cv::Mat> &prev_pyramid = prev.grey_pyramid.empty() ? prev_built : prev.grey_pyramid;
-	const std::vector<cv::Mat> &cur_pyramid = cur.grey_pyramid.empty() ? cur_built : cur.grey_pyramid;
+	std::vector<cv::Mat> prev_scratch, cur_scratch;
+	const std::vector<cv::Mat> &prev_pyramid = pyramid_of(prev, prev_scratch, params);
+	const std::vector<cv::Mat> &cur_pyramid = pyramid_of(cur, cur_scratch, params);
 	std::vector<uchar> status;
 	std::vector<float> error;
 	cv::calcOpticalFlowPyrLK(prev_pyramid, cur_pyramid, from, to, status, error, window, kRescueLevels - 1, stop,
@@ -334,7 +351,6 @@ int rescue_matches(const FrameFeatures &prev, const FrameFeatures &cur, std::spa
 
 	// The nearest unmatched keypoint where each point landed.
 	const float radius = params.rescue_radius_px;
-	const KeypointGrid grid(cur.keypoints, std::max(radius, 1.0F));
 	struct Candidate {
 		float distance2;
 		int prev, cur;
@@ -371,7 +387,8 @@ int rescue_matches(const FrameFeatures &prev, const FrameFeatures &cur, std::spa
 	cv::calcOpticalFlowPyrLK(cur_pyramid, prev_pyramid, landed, back, status, error, window, kRescueLevels - 1,
 				 stop, cv::OPTFLOW_USE_INITIAL_FLOW);
 	const bool binary = binary_descriptors(prev, cur);
-	const int words = prev.descriptors.cols / 8;
+	const cv::Mat prev_d = continuous(prev.descriptors);
+	const cv::Mat cur_d = continuous(cur.descriptors);
 	const float back2 = params.rescue_back_px * params.rescue_back_px;
 	size_t kept = 0;
 	for (size_t k = 0; k < candidates.size(); ++k) {
@@ -379,20 +396,10 @@ int rescue_matches(const FrameFeatures &prev, const FrameFeatures &cur, std::spa
 		if (status[k] == 0 || !(round_trip.dot(round_trip) <= back2))
 			continue;
 		Candidate c = candidates[k];
-		if (binary) {
-			int bits = 0;
-			const cv::Mat prev_row = prev.descriptors.row(c.prev), cur_row = cur.descriptors.row(c.cur);
-			if (prev_row.isContinuous() && cur_row.isContinuous())
-				hamming_rows(prev_row.ptr<uint64_t>(0), cur_row.ptr<uint64_t>(0), 1, words, &bits);
-			else
-				bits = static_cast<int>(cv::norm(prev_row, cur_row, cv::NORM_HAMMING));
-			if (bits > params.rescue_max_distance)
-				continue;
-			c.descriptor_distance = static_cast<float>(bits);
-		} else {
-			c.descriptor_distance = static_cast<float>(
-				cv::norm(prev.descriptors.row(c.prev), cur.descriptors.row(c.cur), cur.norm_type));
-		}
+		c.descriptor_distance = descriptor_distance(prev_d, c.prev, cur_d, c.cur, binary, cur.norm_type);
+		// max_distance is in Hamming bits; float descriptors have no such scale.
+		if (binary && c.descriptor_distance > static_cast<float>(params.rescue_max_distance))
+			continue;
 		candidates[kept++] = c;
 	}
 	candidates.resize(kept);
