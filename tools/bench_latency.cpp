@@ -5,6 +5,9 @@
 // With --dds, the stereo path again with the daemon's publisher: NDJSON messages only (DDS off), NDJSON + DDS
 // with no subscriber, and NDJSON + DDS with a subscriber in another participant taking every sample: issue
 // 18's "p99 within 10 % of DDS off", measured in one run.
+// With --prerendered the sim's frames are rendered before the runs and played back at the frame rate: the sim
+// draws two 1024x768 eyes in tens of milliseconds of CPU a frame (printed), which a camera does not take
+// from the host, so without it the pipeline shares its two cores with the renderer.
 #include <atomic>
 #include <cstdio>
 #include <map>
@@ -15,10 +18,14 @@
 #include <thread>
 #include <vector>
 
+#include <ctime>
+#include <sys/resource.h>
+
 #include <CLI/CLI.hpp>
 #include <dds/dds.h>
 #include <spdlog/spdlog.h>
 
+#include "core/clock.hpp"
 #include "core/latency.hpp"
 #include "core/protocol.hpp"
 #include "daemon/app.hpp"
@@ -30,9 +37,86 @@ using namespace stereod;
 
 namespace {
 
+/// CPU time of the whole process (every thread), seconds.
+double process_cpu_s()
+{
+	rusage usage{};
+	getrusage(RUSAGE_SELF, &usage);
+	const auto seconds = [](const timeval &t) { return static_cast<double>(t.tv_sec) + t.tv_usec * 1e-6; };
+	return seconds(usage.ru_utime) + seconds(usage.ru_stime);
+}
+
+/// The sim's frames rendered once, before any run, shared by every run that plays them.
+struct RenderedFrames {
+	drivers::SourceInfo info;
+	std::vector<StereoFrame> frames;
+	double render_cpu_ms = 0; ///< process CPU per frame while rendering (both eyes and the truth)
+};
+
+std::shared_ptr<const RenderedFrames> prerender(drivers::SourceConfig config, double seconds)
+{
+	auto out = std::make_shared<RenderedFrames>();
+	config.realtime = false;
+	config.sim.frames = static_cast<uint64_t>(std::ceil(seconds * config.sim.fps)) + 30;
+	auto source = drivers::SourceRegistry::with_builtin_drivers().create(config);
+	out->info = source->info();
+	out->frames.resize(config.sim.frames);
+	const double cpu0 = process_cpu_s();
+	for (auto &frame : out->frames) {
+		frame.allocate(out->info.geometry);
+		if (source->grab(frame) != drivers::GrabStatus::Frame)
+			throw std::runtime_error("the sim ended early");
+	}
+	out->render_cpu_ms = (process_cpu_s() - cpu0) * 1e3 / static_cast<double>(out->frames.size());
+	out->info.live = true;
+	return out;
+}
+
+/// Plays pre-rendered frames at their frame rate, copying each into the pool's frame as a camera driver
+/// copies its buffer: what the pipeline sees is the live sim's, without the renderer on the same cores.
+class PrerenderedSource final : public drivers::FrameSource
+{
+public:
+	explicit PrerenderedSource(std::shared_ptr<const RenderedFrames> frames) : frames_(std::move(frames)) {}
+	const drivers::SourceInfo &info() const override { return frames_->info; }
+	drivers::GrabStatus grab(StereoFrame &into) override
+	{
+		if (next_ >= frames_->frames.size())
+			return drivers::GrabStatus::EndOfStream;
+		const StereoFrame &from = frames_->frames[next_];
+		if (next_ == 0)
+			start_ns_ = monotonic_ns();
+		const int64_t when = start_ns_ + from.device_ns;
+		timespec ts{static_cast<time_t>(when / 1'000'000'000), static_cast<long>(when % 1'000'000'000)};
+		while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
+		}
+		from.left.copyTo(into.left);
+		if (!into.right.empty())
+			from.right.copyTo(into.right);
+		if (!into.truth.object_ids.empty())
+			from.truth.object_ids.copyTo(into.truth.object_ids);
+		into.truth.camera_pose = from.truth.camera_pose;
+		into.truth.objects = from.truth.objects;
+		into.truth.object_count = from.truth.object_count;
+		into.sequence = from.sequence;
+		into.device_ns = from.device_ns;
+		into.host_ns = monotonic_ns();
+		into.lr_skew_ns = 0;
+		into.status = FrameStatus::Ok;
+		++next_;
+		return drivers::GrabStatus::Frame;
+	}
+
+private:
+	std::shared_ptr<const RenderedFrames> frames_;
+	size_t next_ = 0;
+	int64_t start_ns_ = 0;
+};
+
 struct Run {
 	protocol::LatencySummary latency;
 	double fps = 0;
+	double cpu_ms = 0; ///< process CPU per published frame, every thread (the sim's rendering too when live)
 	daemon::PipelineStats stats;
 	std::map<std::string, double> stage_ms; ///< mean per published frame
 	std::optional<daemon::DdsPublisher::Stats> dds;
@@ -91,9 +175,15 @@ private:
 	std::thread thread_;
 };
 
-Run run(const drivers::SourceConfig &source_config, Path path, double seconds, size_t workers,
-	Publish publish = Publish::None, vision::GroupFlow flow = vision::GroupFlow::Sparse,
-	const vision::StereoParams &stereo = {}, const vision::MatchParams &matching = {})
+/// Where the frames come from: the sim rendering live, or the pre-rendered frames when given.
+struct Frames {
+	drivers::SourceConfig config;
+	std::shared_ptr<const RenderedFrames> rendered;
+};
+
+Run run(const Frames &frames, Path path, double seconds, size_t workers, Publish publish = Publish::None,
+	vision::GroupFlow flow = vision::GroupFlow::Sparse, const vision::StereoParams &stereo = {},
+	const vision::MatchParams &matching = {})
 {
 	std::unique_ptr<daemon::DdsPublisher> dds;
 	std::unique_ptr<Subscriber> subscriber;
@@ -106,7 +196,11 @@ Run run(const drivers::SourceConfig &source_config, Path path, double seconds, s
 	if (publish == Publish::DdsSubscribed)
 		subscriber = std::make_unique<Subscriber>("bench");
 	std::string message; // built as the daemon builds it: the cost being compared
-	auto source = drivers::SourceRegistry::with_builtin_drivers().create(source_config);
+	std::unique_ptr<drivers::FrameSource> source;
+	if (frames.rendered)
+		source = std::make_unique<PrerenderedSource>(frames.rendered);
+	else
+		source = drivers::SourceRegistry::with_builtin_drivers().create(frames.config);
 	daemon::PipelineOptions options;
 	options.workers = workers;
 	options.overflow = OverflowPolicy::DropOldest;
@@ -130,14 +224,17 @@ Run run(const drivers::SourceConfig &source_config, Path path, double seconds, s
 		for (const auto &t : r.timing)
 			stages[t.name] += t.ms;
 	});
+	const double cpu0 = process_cpu_s();
 	pipeline.start();
 	std::this_thread::sleep_for(std::chrono::duration<double>(seconds));
 	pipeline.request_stop();
 	pipeline.wait();
+	const double cpu_s = process_cpu_s() - cpu0;
 	Run out;
 	out.stats = pipeline.stats();
 	out.latency = summarize_ns(latencies);
 	out.fps = static_cast<double>(latencies.size()) / seconds;
+	out.cpu_ms = cpu_s * 1e3 / std::max<double>(1, static_cast<double>(latencies.size()));
 	const double n = std::max<double>(1, static_cast<double>(latencies.size()));
 	for (const auto &[name, ms] : stages)
 		out.stage_ms[name] = ms / n;
@@ -154,9 +251,9 @@ void row(const char *name, const Run &r)
 		const auto it = r.stage_ms.find(key);
 		return it == r.stage_ms.end() ? 0.0 : it->second;
 	};
-	std::printf("| %-28s | %6.1f | %7.2f | %7.2f | %7.2f | %7.2f | %6llu | %6llu | %6.2f | %6.2f | %6.2f | %6.2f | "
-		    "%6.2f | %6.2f | %6.2f |\n",
-		    name, r.fps, r.latency.p50_ms, r.latency.p90_ms, r.latency.p99_ms, r.latency.max_ms,
+	std::printf("| %-28s | %6.1f | %6.1f | %7.2f | %7.2f | %7.2f | %7.2f | %6llu | %6llu | %6.2f | %6.2f | %6.2f | "
+		    "%6.2f | %6.2f | %6.2f | %6.2f |\n",
+		    name, r.fps, r.cpu_ms, r.latency.p50_ms, r.latency.p90_ms, r.latency.p99_ms, r.latency.max_ms,
 		    static_cast<unsigned long long>(r.stats.ring_evicted),
 		    static_cast<unsigned long long>(r.stats.pool_exhausted), stage("extract"), stage("stereo"),
 		    stage("match") + stage("subpixel"), stage("classify"), stage("pose"),
@@ -183,21 +280,34 @@ int main(int argc, char **argv)
 	app.add_flag("--flow", with_flow, "also the stereo path with the groups on seed 002's global flow (lk, dis)");
 	bool with_dds = false;
 	app.add_flag("--dds", with_dds, "also the stereo path publishing NDJSON, NDJSON + DDS, and with a subscriber");
+	bool prerendered = false;
+	app.add_flag("--prerendered", prerendered,
+		     "render the sim's frames before the runs and play them at the frame rate (needs about 5 MB of "
+		     "memory per frame at 1024x768: 2.5 GB for 15 s)");
 	CLI11_PARSE(app, argc, argv);
 	spdlog::set_level(spdlog::level::warn);
 
-	drivers::SourceConfig config;
-	config.realtime = true;
-	config.sim.width = width;
-	config.sim.height = height;
-	config.sim.fps = fps;
-	config.sim.scene = scene;
-	std::printf("sim '%s' %dx%d stereo at %.0f fps, %zu workers, %.0f s per run, drop-oldest\n\n", scene.c_str(),
+	Frames config;
+	config.config.realtime = true;
+	config.config.sim.width = width;
+	config.config.sim.height = height;
+	config.config.sim.fps = fps;
+	config.config.sim.scene = scene;
+	std::printf("sim '%s' %dx%d stereo at %.0f fps, %zu workers, %.0f s per run, drop-oldest\n", scene.c_str(),
 		    width, height, fps, workers, seconds);
-	std::printf("| %-28s | %6s | %7s | %7s | %7s | %7s | %6s | %6s | %6s | %6s | %6s | %6s | %6s | %6s | %6s |\n",
-		    "pipeline", "fps", "p50 ms", "p90 ms", "p99 ms", "max ms", "ring", "pool", "extr.", "stereo",
-		    "match", "class.", "pose", "flow", "groups");
-	std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+	if (prerendered) {
+		config.rendered = prerender(config.config, seconds);
+		std::printf("frames pre-rendered and played at %.0f fps (rendering them took %.1f ms of CPU a frame, "
+			    "%zu frames)\n",
+			    fps, config.rendered->render_cpu_ms, config.rendered->frames.size());
+	} else {
+		std::printf("frames rendered live by the sim on the same cores (--prerendered to leave it out)\n");
+	}
+	std::printf("\n| %-28s | %6s | %6s | %7s | %7s | %7s | %7s | %6s | %6s | %6s | %6s | %6s | %6s | %6s | %6s | "
+		    "%6s |\n",
+		    "pipeline", "fps", "CPU ms", "p50 ms", "p90 ms", "p99 ms", "max ms", "ring", "pool", "extr.",
+		    "stereo", "match", "class.", "pose", "flow", "groups");
+	std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
 	row("spine only (vision off)", run(config, Path::Spine, seconds, workers));
 	row("ORB + seed-000 (left eye)", run(config, Path::Mono, seconds, workers));
 	row("stereo + pose (default)", run(config, Path::Stereo, seconds, workers));

@@ -212,6 +212,9 @@ double measured_disparity_sigma(std::span<const cv::Vec3f> prev_xyz, std::span<c
 bool continues_motion(cv::Point2f residual, cv::Point2f prev_residual, double residual_var_px2, double change,
 		      double quantile);
 
+/// The standard normal quantile (inverse CDF) at probability p, to double precision.
+double normal_quantile(double p);
+
 /// The chi-square quantile for 1-3 degrees of freedom at probability p (0.95, 0.99 or 0.999).
 double chi2_quantile(int dof, double p);
 

@@ -39,7 +39,8 @@ struct FrameFeatures {
 	/// The left image in grey (owned, not a pool buffer), for sub-pixel refinement of the temporal matches.
 	cv::Mat grey;
 	/// The grey image's Lucas-Kanade pyramid with its derivatives (lk_pyramid, matching.hpp), built in the
-	/// extract stage, which runs beside other frames', so the rescue in the serial pair stage does not build it.
+	/// extract stage, which runs beside other frames', so the rescue and the sub-pixel step in the serial pair
+	/// stage do not build it.
 	std::vector<cv::Mat> grey_pyramid;
 	/// The grey left image scaled for the dense flow (dense_motion.hpp), when the groups use it.
 	cv::Mat flow_image;

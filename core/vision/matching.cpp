@@ -291,10 +291,11 @@ std::vector<Match> match_features(const FrameFeatures &prev, const FrameFeatures
 
 std::vector<cv::Mat> lk_pyramid(const cv::Mat &grey, const MatchParams &params)
 {
+	// Bordered for the larger of the two windows that use it: the rescue's and the sub-pixel step's.
+	const int border = std::max(params.rescue_window_px, params.subpixel_window_px);
 	std::vector<cv::Mat> pyramid;
 	if (!grey.empty())
-		cv::buildOpticalFlowPyramid(grey, pyramid, cv::Size(params.rescue_window_px, params.rescue_window_px),
-					    kRescueLevels - 1, true);
+		cv::buildOpticalFlowPyramid(grey, pyramid, cv::Size(border, border), kRescueLevels - 1, true);
 	return pyramid;
 }
 
@@ -416,18 +417,22 @@ int rescue_matches(const FrameFeatures &prev, const FrameFeatures &cur, std::spa
 	return added;
 }
 
-int refine_matches(const cv::Mat &prev_grey, const cv::Mat &cur_grey, std::span<const cv::Point2f> prev_pts,
+int refine_matches(const FrameFeatures &prev, const FrameFeatures &cur, std::span<const cv::Point2f> prev_pts,
 		   std::span<cv::Point2f> cur_pts, const MatchParams &params)
 {
-	if (prev_pts.empty() || prev_pts.size() != cur_pts.size() || prev_grey.empty() || cur_grey.empty() ||
-	    prev_grey.size() != cur_grey.size())
+	if (prev_pts.empty() || prev_pts.size() != cur_pts.size() || prev.grey.empty() || cur.grey.empty() ||
+	    prev.grey.size() != cur.grey.size())
 		return 0;
+	std::vector<cv::Mat> prev_scratch, cur_scratch;
+	const std::vector<cv::Mat> &prev_pyramid = pyramid_of(prev, prev_scratch, params);
+	const std::vector<cv::Mat> &cur_pyramid = pyramid_of(cur, cur_scratch, params);
 	const std::vector<cv::Point2f> from(prev_pts.begin(), prev_pts.end());
 	std::vector<cv::Point2f> to(cur_pts.begin(), cur_pts.end());
 	std::vector<uchar> status;
 	std::vector<float> error;
 	const cv::Size window(params.subpixel_window_px, params.subpixel_window_px);
-	cv::calcOpticalFlowPyrLK(prev_grey, cur_grey, from, to, status, error, window, 1,
+	// Two levels of the frames' pyramid (built once per frame in the extract stage, with the rescue's).
+	cv::calcOpticalFlowPyrLK(prev_pyramid, cur_pyramid, from, to, status, error, window, 1,
 				 cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 20, 0.01),
 				 cv::OPTFLOW_USE_INITIAL_FLOW);
 	int refined = 0;

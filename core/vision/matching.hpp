@@ -50,8 +50,8 @@ std::vector<Match> match_features(const FrameFeatures &prev, const FrameFeatures
 std::vector<Match> match_features_guided(const FrameFeatures &prev, const FrameFeatures &cur,
 					 std::span<const cv::Point2f> predicted, const MatchParams &params);
 
-/// The Lucas-Kanade pyramid rescue_matches follows points on: 3 levels of `grey` with their derivatives,
-/// bordered for params.rescue_window_px.
+/// The Lucas-Kanade pyramid rescue_matches and refine_matches follow points on: 3 levels of `grey` with their
+/// derivatives, bordered for the larger of params.rescue_window_px and params.subpixel_window_px.
 std::vector<cv::Mat> lk_pyramid(const cv::Mat &grey, const MatchParams &params);
 
 /// Matches the descriptor tests refused, found again by the image: each keypoint of `prev` left unmatched by
@@ -64,10 +64,11 @@ std::vector<cv::Mat> lk_pyramid(const cv::Mat &grey, const MatchParams &params);
 int rescue_matches(const FrameFeatures &prev, const FrameFeatures &cur, std::span<const cv::Point2f> predicted,
 		   std::vector<Match> &matches, const MatchParams &params);
 
-/// Sub-pixel positions in `cur_grey` of the points `prev_pts` of `prev_grey`, starting from `cur_pts`
-/// (one pyramidal Lucas-Kanade step, seeded): a point LK loses, or moves farther than max_shift_px, keeps its
-/// start. Returns how many were refined.
-int refine_matches(const cv::Mat &prev_grey, const cv::Mat &cur_grey, std::span<const cv::Point2f> prev_pts,
+/// Sub-pixel positions in `cur.grey` of the points `prev_pts` of `prev.grey`, starting from `cur_pts`
+/// (Lucas-Kanade on two pyramid levels, seeded; on the frames' `grey_pyramid`, else built here): a point LK
+/// loses, or moves farther than max_shift_px, keeps its start. Returns how many were refined; nothing without
+/// both grey images.
+int refine_matches(const FrameFeatures &prev, const FrameFeatures &cur, std::span<const cv::Point2f> prev_pts,
 		   std::span<cv::Point2f> cur_pts, const MatchParams &params);
 
 } // namespace stereod::vision

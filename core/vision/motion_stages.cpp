@@ -205,7 +205,7 @@ FrameFeatures extract_stage(const StereoFrame &frame, const MotionParams &params
 			// A grey frame's image is a pool buffer that the next capture overwrites: keep a copy.
 			features.grey = grey.data == frame.left.data ? grey.clone() : grey;
 	}
-	if (params.matching.rescue) {
+	if (params.matching.subpixel || params.matching.rescue) {
 		StageTimer timer(timing, "pyramid");
 		features.grey_pyramid = lk_pyramid(grey, params.matching);
 	}
@@ -313,7 +313,7 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 			from[i] = pairs[i].prev;
 			to[i] = pairs[i].cur;
 		}
-		refine_matches(prev->grey, cur.grey, from, to, params.matching);
+		refine_matches(*prev, cur, from, to, params.matching);
 		for (size_t i = 0; i < n; ++i)
 			pairs[i].cur = to[i];
 	}

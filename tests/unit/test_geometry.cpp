@@ -1,5 +1,7 @@
 // Known answers for the stereo geometry: triangulation, sparse stereo on constructed images, PnP on
 // constructed points, seed 001's eq. 1 and eq. 4 on hand-computed cases, the motion prior.
+#include <cmath>
+#include <numbers>
 #include <random>
 
 #include <gtest/gtest.h>
@@ -135,6 +137,21 @@ TEST(Geometry, SeedEquationsOneAndFourByHand)
 	EXPECT_EQ(d1_only.dof, 1);
 	EXPECT_TRUE(d1_only.moving);
 	EXPECT_FALSE(geometric_test(context, prev_px, unknown, cur_px, NAN).moving);
+}
+
+TEST(Geometry, NormalQuantilesAreExact)
+{
+	// Published values of the inverse standard normal CDF, in the centre and in both tails.
+	EXPECT_DOUBLE_EQ(normal_quantile(0.5), 0.0);
+	EXPECT_NEAR(normal_quantile(0.975), 1.959963984540054, 1e-12);
+	EXPECT_NEAR(normal_quantile(0.99), 2.326347874040841, 1e-12);
+	EXPECT_NEAR(normal_quantile(0.999), 3.090232306167814, 1e-12);
+	EXPECT_NEAR(normal_quantile(0.01), -2.326347874040841, 1e-12);
+	EXPECT_NEAR(normal_quantile(1e-6), -4.753424308822899, 1e-10);
+	EXPECT_NEAR(normal_quantile(0.3), -0.524400512708041, 1e-12);
+	// The CDF of the quantile gives back p, across the range.
+	for (double p = 0.001; p < 1; p += 0.0137)
+		EXPECT_NEAR(0.5 * std::erfc(-normal_quantile(p) / std::numbers::sqrt2), p, 1e-14) << p;
 }
 
 TEST(Geometry, ChiSquareQuantilesAreClose)
@@ -544,11 +561,22 @@ TEST(Matching, LucasKanadeRefinesToSubpixel)
 		       cv::BORDER_REFLECT_101);
 	const std::vector<cv::Point2f> from = {{100, 100}, {200, 150}, {60, 180}};
 	std::vector<cv::Point2f> to = {{103, 98}, {203, 148}, {63, 178}}; // keypoint positions, whole pixels
-	EXPECT_EQ(refine_matches(prev, cur, from, to, MatchParams{}), 3);
+	FrameFeatures a, b;
+	a.grey = prev;
+	b.grey = cur;
+	const std::vector<cv::Point2f> start = to;
+	EXPECT_EQ(refine_matches(a, b, from, to, MatchParams{}), 3);
 	for (size_t i = 0; i < from.size(); ++i) {
 		EXPECT_NEAR(to[i].x - from[i].x, 3.4, 0.08);
 		EXPECT_NEAR(to[i].y - from[i].y, -1.7, 0.08);
 	}
+	// On the pyramids the extract stage builds, the same positions.
+	a.grey_pyramid = lk_pyramid(a.grey, MatchParams{});
+	b.grey_pyramid = lk_pyramid(b.grey, MatchParams{});
+	std::vector<cv::Point2f> again = start;
+	EXPECT_EQ(refine_matches(a, b, from, again, MatchParams{}), 3);
+	for (size_t i = 0; i < from.size(); ++i)
+		EXPECT_EQ(again[i], to[i]);
 }
 
 TEST(Stereo, CalibrationHealthWarnsPastHalfAPixel)
