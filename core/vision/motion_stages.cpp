@@ -197,10 +197,30 @@ FrameFeatures extract_stage(const StereoFrame &frame, const MotionParams &params
 {
 	FrameFeatures features;
 	cv::Mat grey;
+	// A source with both eyes is measured by stereo even when it also has a depth image (the sim's depth
+	// is its ground truth); a depth image alone (RGB-D) gives the points directly.
+	const bool stereo = params.rig && !frame.right.empty() && params.stereo.enabled;
+	const bool right_wanted = stereo && right_features_wanted(params.stereo, frame.sequence);
+	cv::Mat right_grey;
+	FrameFeatures right;
 	{
 		StageTimer timer(timing, "extract");
 		grey = grey_of(frame.left);
-		features = extract_features(frame.left, params.features, params.classifier.colour_radius, &grey);
+		if (right_wanted) {
+			// The right eye's features (every frame with stereo.right_features, else the health frames)
+			// are found beside the left's, on another core where one is free: the frame then waits for
+			// the longer of the two, not their sum, so the health frames do not make the latency's tail.
+			right_grey = grey_of(frame.right);
+			cv::parallel_for_(cv::Range(0, 2), [&](const cv::Range &eyes) {
+				for (int eye = eyes.start; eye < eyes.end; ++eye)
+					(eye == 0 ? features : right) = extract_features(
+						eye == 0 ? frame.left : frame.right, params.features,
+						params.classifier.colour_radius, eye == 0 ? &grey : &right_grey);
+			});
+		} else {
+			features =
+				extract_features(frame.left, params.features, params.classifier.colour_radius, &grey);
+		}
 		if (params.matching.subpixel || params.matching.rescue)
 			// A grey frame's image is a pool buffer that the next capture overwrites: keep a copy.
 			features.grey = grey.data == frame.left.data ? grey.clone() : grey;
@@ -226,9 +246,6 @@ FrameFeatures extract_stage(const StereoFrame &frame, const MotionParams &params
 	}
 	if (!params.rig)
 		return features;
-	// A source with both eyes is measured by stereo even when it also has a depth image (the sim's depth
-	// is its ground truth); a depth image alone (RGB-D) gives the points directly.
-	const bool stereo = !frame.right.empty() && params.stereo.enabled;
 	if (!stereo && !frame.depth.empty()) {
 		StageTimer timer(timing, "depth");
 		features.xyz = points_from_depth(features.keypoints, frame.depth, *params.rig);
@@ -238,11 +255,8 @@ FrameFeatures extract_stage(const StereoFrame &frame, const MotionParams &params
 	if (!stereo)
 		return features;
 	StageTimer timer(timing, "stereo");
-	const cv::Mat right_grey = grey_of(frame.right);
-	const FrameFeatures right =
-		right_features_wanted(params.stereo, frame.sequence)
-			? extract_features(frame.right, params.features, params.classifier.colour_radius, &right_grey)
-			: FrameFeatures{};
+	if (right_grey.empty())
+		right_grey = grey_of(frame.right);
 	const double scale_step = params.features.detector == Detector::Orb ? params.features.orb_scale : 1.4;
 	StereoDepth depth = match_stereo(features, right, grey, right_grey, *params.rig, params.stereo, scale_step);
 	features.xyz = std::move(depth.xyz);
