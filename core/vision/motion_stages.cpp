@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <future>
 #include <limits>
 
 #include <opencv2/imgproc.hpp>
@@ -206,21 +207,21 @@ FrameFeatures extract_stage(const StereoFrame &frame, const MotionParams &params
 	{
 		StageTimer timer(timing, "extract");
 		grey = grey_of(frame.left);
+		// The right eye's features (every frame with stereo.right_features, else the health frames) are found
+		// beside the left's, on a thread of their own: where a core is free the frame then waits for the
+		// longer of the two, not their sum, so the health frames do not make the latency's tail. (A thread,
+		// not OpenCV's parallel_for_: ThreadSanitizer cannot see that pool's hand-off.)
+		std::future<FrameFeatures> right_eye;
 		if (right_wanted) {
-			// The right eye's features (every frame with stereo.right_features, else the health frames)
-			// are found beside the left's, on another core where one is free: the frame then waits for
-			// the longer of the two, not their sum, so the health frames do not make the latency's tail.
 			right_grey = grey_of(frame.right);
-			cv::parallel_for_(cv::Range(0, 2), [&](const cv::Range &eyes) {
-				for (int eye = eyes.start; eye < eyes.end; ++eye)
-					(eye == 0 ? features : right) = extract_features(
-						eye == 0 ? frame.left : frame.right, params.features,
-						params.classifier.colour_radius, eye == 0 ? &grey : &right_grey);
+			right_eye = std::async(std::launch::async, [&] {
+				return extract_features(frame.right, params.features, params.classifier.colour_radius,
+							&right_grey);
 			});
-		} else {
-			features =
-				extract_features(frame.left, params.features, params.classifier.colour_radius, &grey);
 		}
+		features = extract_features(frame.left, params.features, params.classifier.colour_radius, &grey);
+		if (right_eye.valid())
+			right = right_eye.get();
 		if (params.matching.subpixel || params.matching.rescue)
 			// A grey frame's image is a pool buffer that the next capture overwrites: keep a copy.
 			features.grey = grey.data == frame.left.data ? grey.clone() : grey;

@@ -50,6 +50,42 @@ TEST(Pipeline, BlockPublishesEveryFrameInOrder)
 	EXPECT_EQ(stats.source_state, "finished");
 }
 
+TEST(Pipeline, StereoPathMatchesTheRightEyesFeaturesOnHealthFramesOnly)
+{
+	// The stereo path through the workers: the right eye's features are extracted beside the left's (on
+	// another thread) on every 5th frame, and only those frames have descriptor candidates. Under TSan this
+	// is the check that the two eyes' extraction shares nothing it should not.
+	drivers::SourceConfig config;
+	config.realtime = false;
+	config.sim.width = 320;
+	config.sim.height = 240;
+	config.sim.frames = 21;
+	auto source = drivers::SourceRegistry::with_builtin_drivers().create(config);
+	std::vector<FrameResult> results;
+	PipelineOptions options;
+	options.workers = 2;
+	options.overflow = OverflowPolicy::Block;
+	options.motion.features.max_features = 300;
+	options.motion.rig = source->info().calibration;
+	options.motion.stereo.health_every_frames = 5;
+	Pipeline pipeline(std::move(source), options, [&](FrameResult &r) { results.push_back(std::move(r)); });
+	pipeline.start();
+	pipeline.wait();
+	ASSERT_EQ(results.size(), 21U);
+	for (size_t i = 0; i < results.size(); ++i) {
+		ASSERT_TRUE(results[i].stereo) << "frame " << i;
+		EXPECT_GT(results[i].stereo->matched, 50) << "frame " << i;
+		if (i % 5 == 0)
+			EXPECT_GT(results[i].stereo->candidates, 50) << "health frame " << i;
+		else
+			EXPECT_EQ(results[i].stereo->candidates, 0) << "frame " << i;
+		if (i > 0) {
+			ASSERT_TRUE(results[i].ego) << "frame " << i;
+			EXPECT_TRUE(results[i].ego->valid) << "frame " << i;
+		}
+	}
+}
+
 TEST(Pipeline, DropOldestCountsWhatASlowConsumerLoses)
 {
 	std::vector<uint64_t> published;
