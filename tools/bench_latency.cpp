@@ -175,10 +175,12 @@ private:
 	std::thread thread_;
 };
 
-/// Where the frames come from: the sim rendering live, or the pre-rendered frames when given.
+/// Where the frames come from (the sim rendering live, or the pre-rendered frames when given) and the ring
+/// they wait in.
 struct Frames {
 	drivers::SourceConfig config;
 	std::shared_ptr<const RenderedFrames> rendered;
+	size_t ring_capacity = daemon::PipelineOptions{}.ring_capacity;
 };
 
 Run run(const Frames &frames, Path path, double seconds, size_t workers, Publish publish = Publish::None,
@@ -203,6 +205,7 @@ Run run(const Frames &frames, Path path, double seconds, size_t workers, Publish
 		source = drivers::SourceRegistry::with_builtin_drivers().create(frames.config);
 	daemon::PipelineOptions options;
 	options.workers = workers;
+	options.ring_capacity = frames.ring_capacity;
 	options.overflow = OverflowPolicy::DropOldest;
 	options.motion.enabled = path != Path::Spine;
 	if (path == Path::Stereo)
@@ -280,6 +283,11 @@ int main(int argc, char **argv)
 	app.add_flag("--flow", with_flow, "also the stereo path with the groups on seed 002's global flow (lk, dis)");
 	bool with_dds = false;
 	app.add_flag("--dds", with_dds, "also the stereo path publishing NDJSON, NDJSON + DDS, and with a subscriber");
+	size_t ring = daemon::PipelineOptions{}.ring_capacity;
+	app.add_option("--ring", ring, "frames queued between capture and processing (pipeline.ring_capacity)")
+		->check(CLI::Range(1, 1024));
+	bool default_only = false;
+	app.add_flag("--default-only", default_only, "only the stereo path as configured by default");
 	bool prerendered = false;
 	app.add_flag("--prerendered", prerendered,
 		     "render the sim's frames before the runs and play them at the frame rate (needs about 5 MB of "
@@ -293,8 +301,9 @@ int main(int argc, char **argv)
 	config.config.sim.height = height;
 	config.config.sim.fps = fps;
 	config.config.sim.scene = scene;
-	std::printf("sim '%s' %dx%d stereo at %.0f fps, %zu workers, %.0f s per run, drop-oldest\n", scene.c_str(),
-		    width, height, fps, workers, seconds);
+	config.ring_capacity = ring;
+	std::printf("sim '%s' %dx%d stereo at %.0f fps, %zu workers, ring of %zu, %.0f s per run, drop-oldest\n",
+		    scene.c_str(), width, height, fps, workers, ring, seconds);
 	if (prerendered) {
 		config.rendered = prerender(config.config, seconds);
 		std::printf("frames pre-rendered and played at %.0f fps (rendering them took %.1f ms of CPU a frame, "
@@ -308,6 +317,10 @@ int main(int argc, char **argv)
 		    "pipeline", "fps", "CPU ms", "p50 ms", "p90 ms", "p99 ms", "max ms", "ring", "pool", "extr.",
 		    "stereo", "match", "class.", "pose", "flow", "groups");
 	std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+	if (default_only) {
+		row("stereo + pose (default)", run(config, Path::Stereo, seconds, workers));
+		return 0;
+	}
 	row("spine only (vision off)", run(config, Path::Spine, seconds, workers));
 	row("ORB + seed-000 (left eye)", run(config, Path::Mono, seconds, workers));
 	row("stereo + pose (default)", run(config, Path::Stereo, seconds, workers));
