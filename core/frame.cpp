@@ -49,6 +49,26 @@ void StereoFrame::allocate(const FrameGeometry &geometry)
 		truth.object_ids.release();
 }
 
+void StereoFrame::copy_to(StereoFrame &dst) const
+{
+	dst.sequence = sequence;
+	dst.device_ns = device_ns;
+	dst.host_ns = host_ns;
+	dst.lr_skew_ns = lr_skew_ns;
+	dst.status = status;
+	dst.source_id = source_id;
+	left.copyTo(dst.left);
+	if (!right.empty())
+		right.copyTo(dst.right);
+	if (!depth.empty())
+		depth.copyTo(dst.depth);
+	if (!truth.object_ids.empty())
+		truth.object_ids.copyTo(dst.truth.object_ids);
+	dst.truth.camera_pose = truth.camera_pose;
+	dst.truth.objects = truth.objects;
+	dst.truth.object_count = truth.object_count;
+}
+
 void StereoFrame::reset_metadata() noexcept
 {
 	sequence = 0;

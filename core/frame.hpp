@@ -73,6 +73,9 @@ struct StereoFrame {
 	void allocate(const FrameGeometry &geometry);
 	/// Resets the metadata for reuse; the buffers stay.
 	void reset_metadata() noexcept;
+	/// Copies everything into `dst`, whose buffers already have this frame's geometry (then nothing is
+	/// allocated: a recorder's or a player's slot).
+	void copy_to(StereoFrame &dst) const;
 };
 
 } // namespace stereod

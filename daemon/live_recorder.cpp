@@ -10,27 +10,6 @@ namespace stereod::daemon {
 
 namespace {
 
-/// `src` into `dst`, whose buffers already have `src`'s geometry (no allocation).
-void copy_frame(const StereoFrame &src, StereoFrame &dst)
-{
-	dst.sequence = src.sequence;
-	dst.device_ns = src.device_ns;
-	dst.host_ns = src.host_ns;
-	dst.lr_skew_ns = src.lr_skew_ns;
-	dst.status = src.status;
-	dst.source_id = src.source_id;
-	src.left.copyTo(dst.left);
-	if (!src.right.empty())
-		src.right.copyTo(dst.right);
-	if (!src.depth.empty())
-		src.depth.copyTo(dst.depth);
-	if (!src.truth.object_ids.empty())
-		src.truth.object_ids.copyTo(dst.truth.object_ids);
-	dst.truth.camera_pose = src.truth.camera_pose;
-	dst.truth.objects = src.truth.objects;
-	dst.truth.object_count = src.truth.object_count;
-}
-
 /// A recording already at `path` (an earlier run, or the run before a reload) is kept: moved aside to
 /// `path.<n>` with the first free n, never overwritten.
 const std::string &keep_existing(const std::string &path)
@@ -107,7 +86,7 @@ void LiveRecorder::offer(const StereoFrame &frame)
 		slot = free_.back();
 		free_.pop_back();
 	}
-	copy_frame(frame, slots_[slot]); // outside the lock: the slot is this thread's until queued
+	frame.copy_to(slots_[slot]); // outside the lock: the slot is this thread's until queued
 	{
 		std::lock_guard lock(mutex_);
 		queued_.push_back(slot);

@@ -18,7 +18,6 @@
 #include <thread>
 #include <vector>
 
-#include <ctime>
 #include <sys/resource.h>
 
 #include <CLI/CLI.hpp>
@@ -86,23 +85,9 @@ public:
 		const StereoFrame &from = frames_->frames[next_];
 		if (next_ == 0)
 			start_ns_ = monotonic_ns();
-		const int64_t when = start_ns_ + from.device_ns;
-		timespec ts{static_cast<time_t>(when / 1'000'000'000), static_cast<long>(when % 1'000'000'000)};
-		while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
-		}
-		from.left.copyTo(into.left);
-		if (!into.right.empty())
-			from.right.copyTo(into.right);
-		if (!into.truth.object_ids.empty())
-			from.truth.object_ids.copyTo(into.truth.object_ids);
-		into.truth.camera_pose = from.truth.camera_pose;
-		into.truth.objects = from.truth.objects;
-		into.truth.object_count = from.truth.object_count;
-		into.sequence = from.sequence;
-		into.device_ns = from.device_ns;
-		into.host_ns = monotonic_ns();
-		into.lr_skew_ns = 0;
-		into.status = FrameStatus::Ok;
+		sleep_until_monotonic_ns(start_ns_ + from.device_ns);
+		from.copy_to(into);
+		into.host_ns = monotonic_ns(); // complete on the host now, as a camera's frame would be
 		++next_;
 		return drivers::GrabStatus::Frame;
 	}

@@ -3,7 +3,6 @@
 // frame per line on standard input.
 #include <cstdint>
 #include <cstdio>
-#include <ctime>
 
 #include "core/clock.hpp"
 #include "drivers/source.hpp"
@@ -38,11 +37,8 @@ public:
 			return true;
 		}
 		const int64_t due = host_start_ns_ + (device_ns - device_start_ns_);
-		if (due > now) {
-			timespec ts{static_cast<time_t>(due / 1'000'000'000), static_cast<long>(due % 1'000'000'000)};
-			while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
-			}
-		}
+		if (due > now)
+			sleep_until_monotonic_ns(due);
 		return true;
 	}
 

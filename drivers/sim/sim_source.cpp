@@ -1,7 +1,6 @@
 // The `sim` driver: renders the synthetic scene frame by frame, paced like a camera when realtime.
 #include <array>
 #include <cmath>
-#include <ctime>
 #include <numbers>
 #include <utility>
 
@@ -60,7 +59,7 @@ public:
 		if (realtime_) {
 			if (next_index_ == 0)
 				start_ns_ = monotonic_ns();
-			sleep_until(start_ns_ + device_ns);
+			sleep_until_monotonic_ns(start_ns_ + device_ns);
 		}
 
 		cv::Mat no_ids, no_depth;
@@ -100,13 +99,6 @@ private:
 			const auto &[up, down] = noise_bank_[(rng_state_ >> 40) % noise_bank_.size()];
 			cv::add(out, up.rowRange(offset, offset + out.rows), out);
 			cv::subtract(out, down.rowRange(offset, offset + out.rows), out);
-		}
-	}
-
-	static void sleep_until(int64_t when_ns)
-	{
-		timespec ts{static_cast<time_t>(when_ns / 1'000'000'000), static_cast<long>(when_ns % 1'000'000'000)};
-		while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
 		}
 	}
 
