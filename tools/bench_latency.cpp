@@ -30,6 +30,7 @@
 #include "daemon/app.hpp"
 #include "daemon/dds/dds_publisher.hpp"
 #include "daemon/pipeline.hpp"
+#include "drivers/replay/pacer.hpp"
 #include "ros2_types.h"
 
 using namespace stereod;
@@ -83,9 +84,7 @@ public:
 		if (next_ >= frames_->frames.size())
 			return drivers::GrabStatus::EndOfStream;
 		const StereoFrame &from = frames_->frames[next_];
-		if (next_ == 0)
-			start_ns_ = monotonic_ns();
-		sleep_until_monotonic_ns(start_ns_ + from.device_ns);
+		pacer_.wait_for(from.device_ns);
 		from.copy_to(into);
 		into.host_ns = monotonic_ns(); // complete on the host now, as a camera's frame would be
 		++next_;
@@ -94,8 +93,8 @@ public:
 
 private:
 	std::shared_ptr<const RenderedFrames> frames_;
+	drivers::Pacer pacer_{drivers::ReplayRate::Recorded}; ///< at the frames' own spacing, like a replay
 	size_t next_ = 0;
-	int64_t start_ns_ = 0;
 };
 
 struct Run {
@@ -160,15 +159,15 @@ private:
 	std::thread thread_;
 };
 
-/// Where the frames come from (the sim rendering live, or the pre-rendered frames when given) and the ring
-/// they wait in.
-struct Frames {
+/// What every run shares: where the frames come from (the sim rendering live, or the pre-rendered frames when
+/// given) and the ring they wait in.
+struct Setup {
 	drivers::SourceConfig config;
 	std::shared_ptr<const RenderedFrames> rendered;
 	size_t ring_capacity = daemon::PipelineOptions{}.ring_capacity;
 };
 
-Run run(const Frames &frames, Path path, double seconds, size_t workers, Publish publish = Publish::None,
+Run run(const Setup &setup, Path path, double seconds, size_t workers, Publish publish = Publish::None,
 	vision::GroupFlow flow = vision::GroupFlow::Sparse, const vision::StereoParams &stereo = {},
 	const vision::MatchParams &matching = {})
 {
@@ -184,13 +183,13 @@ Run run(const Frames &frames, Path path, double seconds, size_t workers, Publish
 		subscriber = std::make_unique<Subscriber>("bench");
 	std::string message; // built as the daemon builds it: the cost being compared
 	std::unique_ptr<drivers::FrameSource> source;
-	if (frames.rendered)
-		source = std::make_unique<PrerenderedSource>(frames.rendered);
+	if (setup.rendered)
+		source = std::make_unique<PrerenderedSource>(setup.rendered);
 	else
-		source = drivers::SourceRegistry::with_builtin_drivers().create(frames.config);
+		source = drivers::SourceRegistry::with_builtin_drivers().create(setup.config);
 	daemon::PipelineOptions options;
 	options.workers = workers;
-	options.ring_capacity = frames.ring_capacity;
+	options.ring_capacity = setup.ring_capacity;
 	options.overflow = OverflowPolicy::DropOldest;
 	options.motion.enabled = path != Path::Spine;
 	if (path == Path::Stereo)
@@ -280,7 +279,7 @@ int main(int argc, char **argv)
 	CLI11_PARSE(app, argc, argv);
 	spdlog::set_level(spdlog::level::warn);
 
-	Frames config;
+	Setup config;
 	config.config.realtime = true;
 	config.config.sim.width = width;
 	config.config.sim.height = height;

@@ -204,6 +204,8 @@ FrameFeatures extract_stage(const StereoFrame &frame, const MotionParams &params
 	const bool right_wanted = stereo && right_features_wanted(params.stereo, frame.sequence);
 	cv::Mat right_grey;
 	FrameFeatures right;
+	// The sub-pixel step and the rescue follow points on the grey image by Lucas-Kanade in the pair stage.
+	const bool follows_by_image = params.matching.subpixel || params.matching.rescue;
 	{
 		StageTimer timer(timing, "extract");
 		grey = grey_of(frame.left);
@@ -222,11 +224,11 @@ FrameFeatures extract_stage(const StereoFrame &frame, const MotionParams &params
 		features = extract_features(frame.left, params.features, params.classifier.colour_radius, &grey);
 		if (right_eye.valid())
 			right = right_eye.get();
-		if (params.matching.subpixel || params.matching.rescue)
+		if (follows_by_image)
 			// A grey frame's image is a pool buffer that the next capture overwrites: keep a copy.
 			features.grey = grey.data == frame.left.data ? grey.clone() : grey;
 	}
-	if (params.matching.subpixel || params.matching.rescue) {
+	if (follows_by_image) {
 		StageTimer timer(timing, "pyramid");
 		features.grey_pyramid = lk_pyramid(grey, params.matching);
 	}
