@@ -561,6 +561,13 @@ const std::vector<Option> &options()
 			"ego", "ransac_threshold_px", "PnP RANSAC inlier distance",
 			[](DaemonConfig &c) -> double & { return c.motion.ego.ransac_threshold_px; }, 0.1, 50));
 		o.push_back(number(
+			"ego", "ransac_threshold_sigmas",
+			"fit the pose again at this many times the first fit's measured noise (0: one fit)",
+			[](DaemonConfig &c) -> double & { return c.motion.ego.ransac_threshold_sigmas; }, 0, 100));
+		o.push_back(number(
+			"ego", "min_ransac_threshold_px", "the second fit's inlier distance at least, pixels",
+			[](DaemonConfig &c) -> double & { return c.motion.ego.min_ransac_threshold_px; }, 0.05, 50));
+		o.push_back(number(
 			"ego", "ransac_iterations", "P3P samples drawn per frame (up to four hypotheses each)",
 			[](DaemonConfig &c) -> int & { return c.motion.ego.ransac_iterations; }, 1, 100000));
 		o.push_back(number(

@@ -118,6 +118,118 @@ geometry::Pose refine_on_inliers(const std::vector<cv::Point3f> &object, const s
 	return pose_of(rvec, tvec);
 }
 
+/// One RANSAC fit and its refinement at one inlier distance.
+struct PoseFit {
+	geometry::Pose pose;
+	std::vector<int> inliers; ///< indices into the fit's points
+	double threshold_px = 0;
+	int samples = 0;
+};
+
+/// RANSAC over P3P hypotheses that `plausible` accepts, scored by EgoParams::ransac_spread_score, then
+/// Levenberg-Marquardt on the best one's inliers (refine_on_inliers). Nothing when no hypothesis had an
+/// inlier.
+template <typename Plausible>
+std::optional<PoseFit> fit_pose(const std::vector<cv::Point3f> &object, const std::vector<cv::Point2f> &image,
+				const geometry::StereoRig &rig, const EgoParams &params, double threshold_px,
+				Plausible plausible)
+{
+	PoseFit fit;
+	fit.threshold_px = threshold_px;
+	const cv::Matx33d k = rig.k();
+	std::mt19937 rng(0x5eed);
+	std::uniform_int_distribution<size_t> pick(0, object.size() - 1);
+	size_t best_support = 0, best_cells = 0;
+	geometry::Pose best;
+	// Samples needed: with a fraction w of inliers, one sample of 3 is all inliers with probability w^3, so
+	// log(1 - confidence) / log(1 - w^3) samples find one with the wanted confidence. At least a few are drawn
+	// so that a lucky first hypothesis on a mover does not end the search.
+	constexpr int kMinSamples = 12;
+	int needed = params.ransac_iterations;
+	const auto samples_for = [&](size_t support) {
+		const double w = static_cast<double>(support) / static_cast<double>(object.size());
+		const double miss = 1.0 - w * w * w;
+		if (params.ransac_confidence <= 0 || params.ransac_confidence >= 1)
+			return params.ransac_iterations;
+		if (miss <= 1e-12)
+			return std::min(kMinSamples, params.ransac_iterations);
+		const double samples = std::ceil(std::log(1.0 - params.ransac_confidence) / std::log(miss));
+		return static_cast<int>(std::clamp(samples,
+						   static_cast<double>(std::min(kMinSamples, params.ransac_iterations)),
+						   static_cast<double>(params.ransac_iterations)));
+	};
+	for (int iteration = 0; iteration < needed; ++iteration) {
+		fit.samples = iteration + 1;
+		std::array<size_t, 3> sample{};
+		sample[0] = pick(rng);
+		do
+			sample[1] = pick(rng);
+		while (sample[1] == sample[0]);
+		do
+			sample[2] = pick(rng);
+		while (sample[2] == sample[0] || sample[2] == sample[1]);
+		std::vector<cv::Point3f> sample_object;
+		std::vector<cv::Point2f> sample_image;
+		for (size_t i : sample) {
+			sample_object.push_back(object[i]);
+			sample_image.push_back(image[i]);
+		}
+		std::vector<cv::Mat> rvecs, tvecs;
+		const int solutions =
+			cv::solveP3P(sample_object, sample_image, k, cv::noArray(), rvecs, tvecs, cv::SOLVEPNP_AP3P);
+		for (int solution = 0; solution < solutions; ++solution) {
+			const geometry::Pose hypothesis =
+				pose_of(rvecs[static_cast<size_t>(solution)], tvecs[static_cast<size_t>(solution)]);
+			if (!plausible(hypothesis))
+				continue;
+			const Support support = count_inliers(object, image, rig, hypothesis, threshold_px);
+			// By spread first: a mover is a compact patch of many points, the static scene spreads over the
+			// image, so a hypothesis that explains a far wall and a mover passing in front of it (the two
+			// look alike when a rotation trades for a translation) loses to one explaining the wall and the
+			// sparse ground below.
+			const bool better = params.ransac_spread_score ? std::pair(support.cells, support.points) >
+										 std::pair(best_cells, best_support)
+								       : support.points > best_support;
+			if (better) {
+				best_support = support.points;
+				best_cells = support.cells;
+				best = hypothesis;
+				needed = samples_for(support.points);
+			}
+		}
+	}
+	if (best_support == 0)
+		return std::nullopt;
+	double rms = 0;
+	fit.inliers = inliers_of(object, image, rig, best, threshold_px, rms);
+	if (static_cast<int>(fit.inliers.size()) < params.min_inliers) {
+		fit.pose = best;
+		return fit;
+	}
+	// A refinement that leaves the bounds (it slid towards a mover among the inliers) is not taken.
+	fit.pose =
+		refine_on_inliers(object, image, rig, best, threshold_px, params.min_inliers, plausible, fit.inliers);
+	fit.inliers = inliers_of(object, image, rig, fit.pose, threshold_px, rms);
+	return fit;
+}
+
+/// Per-axis noise of a static point's residual under `pose`, from the median residual of every candidate,
+/// movers included: unlike the inliers' RMS it is not cut at the RANSAC threshold, and movers are a minority
+/// of the points that vote (a 2-d Gaussian's norm has median 1.1774 sigma).
+double residual_sigma(const std::vector<cv::Point3f> &object, const std::vector<cv::Point2f> &image,
+		      const geometry::StereoRig &rig, const geometry::Pose &pose)
+{
+	std::vector<double> norms(object.size());
+	for (size_t i = 0; i < object.size(); ++i)
+		norms[i] = std::sqrt(error2(object, image, i, rig, pose));
+	if (norms.empty())
+		return 0;
+	const auto mid = norms.begin() + static_cast<std::ptrdiff_t>(norms.size() / 2);
+	std::nth_element(norms.begin(), mid, norms.end());
+	constexpr double kRayleighMedian = 1.1774100225154747; // sqrt(2 ln 2)
+	return std::isfinite(*mid) ? *mid / kRayleighMedian : 0;
+}
+
 } // namespace
 
 double normal_quantile(double p)
@@ -240,96 +352,52 @@ PoseEstimate estimate_pose(std::span<const cv::Vec3f> prev_xyz, std::span<const 
 		return cv::norm(pose.t - prior->predicted.t) <= prior->translation_tolerance_m + kPriorSlackM &&
 		       (prior->predicted.inverse() * pose).angle() <= prior->rotation_tolerance_rad + kPriorSlackRad;
 	};
-	const cv::Matx33d k = rig.k();
-	std::mt19937 rng(0x5eed);
-	std::uniform_int_distribution<size_t> pick(0, object.size() - 1);
-	double rms = 0;
-	std::vector<int> inliers;
-	size_t best_support = 0, best_cells = 0;
-	geometry::Pose best;
-	// Samples needed: with a fraction w of inliers, one sample of 3 is all inliers with probability w^3, so
-	// log(1 - confidence) / log(1 - w^3) samples find one with the wanted confidence. At least a few are drawn
-	// so that a lucky first hypothesis on a mover does not end the search.
-	constexpr int kMinSamples = 12;
-	int needed = params.ransac_iterations;
-	const auto samples_for = [&](size_t support) {
-		const double w = static_cast<double>(support) / static_cast<double>(object.size());
-		const double miss = 1.0 - w * w * w;
-		if (params.ransac_confidence <= 0 || params.ransac_confidence >= 1)
-			return params.ransac_iterations;
-		if (miss <= 1e-12)
-			return std::min(kMinSamples, params.ransac_iterations);
-		const double samples = std::ceil(std::log(1.0 - params.ransac_confidence) / std::log(miss));
-		return static_cast<int>(std::clamp(samples,
-						   static_cast<double>(std::min(kMinSamples, params.ransac_iterations)),
-						   static_cast<double>(params.ransac_iterations)));
+	// Fitted at the footage's own noise: at the loose first distance the near static points that decide the
+	// translation count as much when they are off by 1.5 px as when they fit, and a mover whose image barely
+	// moves can pull the pose along the trade far points cannot see. The noise is the previous frame's when
+	// the prior carries it (one fit), else measured from a first fit at the loose distance.
+	const auto tight_for = [&](double sigma) {
+		return std::clamp(params.ransac_threshold_sigmas * sigma, params.min_ransac_threshold_px,
+				  params.ransac_threshold_px);
 	};
-	for (int iteration = 0; iteration < needed; ++iteration) {
-		out.samples = iteration + 1;
-		std::array<size_t, 3> sample{};
-		sample[0] = pick(rng);
-		do
-			sample[1] = pick(rng);
-		while (sample[1] == sample[0]);
-		do
-			sample[2] = pick(rng);
-		while (sample[2] == sample[0] || sample[2] == sample[1]);
-		std::vector<cv::Point3f> sample_object;
-		std::vector<cv::Point2f> sample_image;
-		for (size_t i : sample) {
-			sample_object.push_back(object[i]);
-			sample_image.push_back(image[i]);
+	const auto enough = [&](const std::optional<PoseFit> &fit) {
+		return fit && static_cast<int>(fit->inliers.size()) >= params.min_inliers;
+	};
+	std::optional<PoseFit> taken;
+	if (params.ransac_threshold_sigmas > 0 && prior != nullptr && prior->noise_px > 0) {
+		taken = fit_pose(object, image, rig, params, tight_for(prior->noise_px), plausible);
+		out.samples += taken ? taken->samples : 0;
+		if (!enough(taken))
+			taken.reset();
+	}
+	if (!taken) {
+		const std::optional<PoseFit> first =
+			fit_pose(object, image, rig, params, params.ransac_threshold_px, plausible);
+		out.samples += first ? first->samples : 0;
+		if (!enough(first)) {
+			const size_t agree = first ? first->inliers.size() : 0;
+			out.reason = "no consistent motion: " + std::to_string(agree) + " of " +
+				     std::to_string(out.candidates) + " points agree" +
+				     (prior != nullptr ? " within the acceleration bounds" : "");
+			return out;
 		}
-		std::vector<cv::Mat> rvecs, tvecs;
-		const int solutions =
-			cv::solveP3P(sample_object, sample_image, k, cv::noArray(), rvecs, tvecs, cv::SOLVEPNP_AP3P);
-		for (int solution = 0; solution < solutions; ++solution) {
-			const geometry::Pose hypothesis =
-				pose_of(rvecs[static_cast<size_t>(solution)], tvecs[static_cast<size_t>(solution)]);
-			if (!plausible(hypothesis))
-				continue;
-			const Support support =
-				count_inliers(object, image, rig, hypothesis, params.ransac_threshold_px);
-			// By spread first: a mover is a compact patch of many points, the static scene spreads over the
-			// image, so a hypothesis that explains a far wall and a mover passing in front of it (the two
-			// look alike when a rotation trades for a translation) loses to one explaining the wall and the
-			// sparse ground below.
-			const bool better = params.ransac_spread_score ? std::pair(support.cells, support.points) >
-										 std::pair(best_cells, best_support)
-								       : support.points > best_support;
-			if (better) {
-				best_support = support.points;
-				best_cells = support.cells;
-				best = hypothesis;
-				needed = samples_for(support.points);
-			}
+		taken = first;
+		const double tight_px = tight_for(residual_sigma(object, image, rig, first->pose));
+		if (params.ransac_threshold_sigmas > 0 && tight_px < params.ransac_threshold_px) {
+			std::optional<PoseFit> second = fit_pose(object, image, rig, params, tight_px, plausible);
+			out.samples += second ? second->samples : 0;
+			if (enough(second))
+				taken = std::move(second);
 		}
 	}
-	if (best_support > 0)
-		inliers = inliers_of(object, image, rig, best, params.ransac_threshold_px, rms);
-	if (static_cast<int>(inliers.size()) < params.min_inliers) {
-		out.reason = "no consistent motion: " + std::to_string(inliers.size()) + " of " +
-			     std::to_string(out.candidates) + " points agree" +
-			     (prior != nullptr ? " within the acceleration bounds" : "");
-		return out;
-	}
-	// A refinement that leaves the bounds (it slid towards a mover among the inliers) is not taken.
-	out.curr_from_prev = refine_on_inliers(object, image, rig, best, params.ransac_threshold_px, params.min_inliers,
-					       plausible, inliers);
-	inliers = inliers_of(object, image, rig, out.curr_from_prev, params.ransac_threshold_px, rms);
+	const double sigma = residual_sigma(object, image, rig, taken->pose);
+	out.curr_from_prev = taken->pose;
+	out.threshold_px = taken->threshold_px;
+	double rms = 0;
+	const std::vector<int> inliers = inliers_of(object, image, rig, taken->pose, taken->threshold_px, rms);
 	out.inliers = static_cast<int>(inliers.size());
 	out.rms_px = rms;
-	{
-		// The median residual over every candidate, movers included: unlike the inliers' RMS it is not cut
-		// at the RANSAC threshold, and movers are a minority of the points that vote.
-		std::vector<double> norms(object.size());
-		for (size_t i = 0; i < object.size(); ++i)
-			norms[i] = std::sqrt(error2(object, image, i, rig, out.curr_from_prev));
-		const auto mid = norms.begin() + static_cast<std::ptrdiff_t>(norms.size() / 2);
-		std::nth_element(norms.begin(), mid, norms.end());
-		constexpr double kRayleighMedian = 1.1774100225154747; // sqrt(2 ln 2)
-		out.residual_sigma_px = std::isfinite(*mid) ? *mid / kRayleighMedian : 0;
-	}
+	out.residual_sigma_px = sigma;
 	for (int i : inliers)
 		out.inlier_mask[index[static_cast<size_t>(i)]] = 1;
 	if (out.inliers < params.min_inliers || !std::isfinite(out.curr_from_prev.t[0]) ||

@@ -29,8 +29,17 @@ namespace stereod::vision {
 
 struct EgoParams {
 	bool enabled = true;		  ///< estimate the pose when the source is stereo (or RGB-D) and calibrated
-	double ransac_threshold_px = 2.0; ///< PnP RANSAC inlier distance
-	int ransac_iterations = 200;	  ///< P3P samples at most (up to four hypotheses each)
+	double ransac_threshold_px = 2.0; ///< PnP RANSAC inlier distance (the first fit's, and the most)
+	/// The fit again with the inlier distance at this many times the first fit's measured noise
+	/// (residual_sigma_px), never under `min_ransac_threshold_px` nor over `ransac_threshold_px`; 0 = one fit.
+	/// When the motion prior carries the previous frame's noise, only the second fit runs.
+	/// Far points cannot tell a small turn from a sideways step, so only the near static points decide the
+	/// translation, by a pixel or two; at a fixed 2 px a mover walking along the optical axis (its image
+	/// barely moving) and the near points' noise leave the trade free, and it drifted by 10-20 mm per frame
+	/// on the sim's `default` where the clean footage's noise is 0.04 px (docs/geometry.md, The pose).
+	double ransac_threshold_sigmas = 3;
+	double min_ransac_threshold_px = 0.5;
+	int ransac_iterations = 200; ///< P3P samples at most (up to four hypotheses each)
 	/// Stop sampling once a sample of all inliers has been drawn with this probability, given the best inlier
 	/// fraction so far (the usual adaptive RANSAC bound); 0 draws all `ransac_iterations`.
 	double ransac_confidence = 0.999;
@@ -109,6 +118,9 @@ struct MotionPrior {
 	geometry::Pose predicted; ///< curr_from_prev if the camera kept its last motion
 	double translation_tolerance_m = 0;
 	double rotation_tolerance_rad = 0;
+	/// The last fit's measured noise (PoseEstimate::residual_sigma_px), 0 = not known. With it the pose is
+	/// fitted once, at EgoParams::ransac_threshold_sigmas times it, instead of twice.
+	double noise_px = 0;
 	/// The prior for a frame `interval_s` after the previous one, whose motion over `last_interval_s` was
 	/// `last_motion` (constant velocity, scaled to the new interval).
 	static MotionPrior constant_velocity(const geometry::Pose &last_motion, double last_interval_s,
@@ -127,7 +139,8 @@ struct PoseEstimate {
 	/// (a 2-d Gaussian's norm has median 1.1774 sigma): the geometric test's noise when it is measured.
 	double residual_sigma_px = 0;
 	bool prior_used = false; ///< the candidates were gated by the motion prior
-	int samples = 0;	 ///< RANSAC samples drawn (EgoParams::ransac_confidence ends it early)
+	int samples = 0;	 ///< RANSAC samples drawn (EgoParams::ransac_confidence ends it early), both fits
+	double threshold_px = 0; ///< the inlier distance of the fit taken
 };
 
 /// `prev_xyz` (frame n-1's camera, NaN = no depth) and `cur_px` are index-aligned; `votes[i] == 0` keeps a

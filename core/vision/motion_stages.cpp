@@ -387,10 +387,12 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 		}
 		std::optional<MotionPrior> prior;
 		if (prev_tracks != nullptr && prev_tracks->last_motion && prev_tracks->interval_ns > 0 &&
-		    frame.device_ns > prev_tracks->t_ns)
+		    frame.device_ns > prev_tracks->t_ns) {
 			prior = MotionPrior::constant_velocity(
 				*prev_tracks->last_motion, static_cast<double>(prev_tracks->interval_ns) * 1e-9,
 				static_cast<double>(frame.device_ns - prev_tracks->t_ns) * 1e-9, params.ego);
+			prior->noise_px = prev_tracks->last_noise_px;
+		}
 		pose = estimate_pose(prev_xyz, cur_px, votes, *params.rig, params.ego, prior ? &*prior : nullptr);
 		if (pose->valid) {
 			double disparity_sigma = params.stereo.disparity_sigma_px;
@@ -666,6 +668,7 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 		ego.valid = moved;
 		if (moved) {
 			tracks.last_motion = pose->curr_from_prev;
+			tracks.last_noise_px = pose->residual_sigma_px;
 			ego.inliers = pose->inliers;
 		} else {
 			ego.reason = pose ? pose->reason : "the previous frame has no depth";

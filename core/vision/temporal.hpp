@@ -74,6 +74,7 @@ struct TrackSet {
 	/// like the rest of the memory; the last estimated motion, to seed the next frame's.
 	std::optional<geometry::Pose> world_from_camera;
 	std::optional<geometry::Pose> last_motion;
+	double last_noise_px = 0; ///< the last pose fit's measured noise (PoseEstimate::residual_sigma_px)
 	/// Per keypoint: labelled dynamic, or failing the geometric test, in this frame. Such a point does not vote
 	/// for the next frame's pose (seed 001: points found dynamic are left out of tracking), so a mover found
 	/// once cannot pull the pose; and a point failing the test again next frame is confirmed dynamic.
