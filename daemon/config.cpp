@@ -562,10 +562,10 @@ const std::vector<Option> &options()
 			[](DaemonConfig &c) -> double & { return c.motion.ego.ransac_threshold_px; }, 0.1, 50));
 		o.push_back(number(
 			"ego", "ransac_threshold_sigmas",
-			"fit the pose again at this many times the first fit's measured noise (0: one fit)",
+			"fit the pose at this many times its measured noise (0: at ransac_threshold_px only)",
 			[](DaemonConfig &c) -> double & { return c.motion.ego.ransac_threshold_sigmas; }, 0, 100));
 		o.push_back(number(
-			"ego", "min_ransac_threshold_px", "the second fit's inlier distance at least, pixels",
+			"ego", "min_ransac_threshold_px", "the inlier distance at the measured noise at least, pixels",
 			[](DaemonConfig &c) -> double & { return c.motion.ego.min_ransac_threshold_px; }, 0.05, 50));
 		o.push_back(number(
 			"ego", "ransac_iterations", "P3P samples drawn per frame (up to four hypotheses each)",

@@ -122,6 +122,7 @@ geometry::Pose refine_on_inliers(const std::vector<cv::Point3f> &object, const s
 struct PoseFit {
 	geometry::Pose pose;
 	std::vector<int> inliers; ///< indices into the fit's points
+	double rms_px = 0;	  ///< re-projection RMS over the inliers
 	double threshold_px = 0;
 	int samples = 0;
 };
@@ -200,16 +201,14 @@ std::optional<PoseFit> fit_pose(const std::vector<cv::Point3f> &object, const st
 	}
 	if (best_support == 0)
 		return std::nullopt;
-	double rms = 0;
-	fit.inliers = inliers_of(object, image, rig, best, threshold_px, rms);
-	if (static_cast<int>(fit.inliers.size()) < params.min_inliers) {
-		fit.pose = best;
+	fit.pose = best;
+	fit.inliers = inliers_of(object, image, rig, best, threshold_px, fit.rms_px);
+	if (static_cast<int>(fit.inliers.size()) < params.min_inliers)
 		return fit;
-	}
 	// A refinement that leaves the bounds (it slid towards a mover among the inliers) is not taken.
 	fit.pose =
 		refine_on_inliers(object, image, rig, best, threshold_px, params.min_inliers, plausible, fit.inliers);
-	fit.inliers = inliers_of(object, image, rig, fit.pose, threshold_px, rms);
+	fit.inliers = inliers_of(object, image, rig, fit.pose, threshold_px, fit.rms_px);
 	return fit;
 }
 
@@ -364,6 +363,7 @@ PoseEstimate estimate_pose(std::span<const cv::Vec3f> prev_xyz, std::span<const 
 		return fit && static_cast<int>(fit->inliers.size()) >= params.min_inliers;
 	};
 	std::optional<PoseFit> taken;
+	double measured_sigma_px = -1; // the taken fit's noise once measured (negative: not yet)
 	if (params.ransac_threshold_sigmas > 0 && prior != nullptr && prior->noise_px > 0) {
 		taken = fit_pose(object, image, rig, params, tight_for(prior->noise_px), plausible);
 		out.samples += taken ? taken->samples : 0;
@@ -382,23 +382,24 @@ PoseEstimate estimate_pose(std::span<const cv::Vec3f> prev_xyz, std::span<const 
 			return out;
 		}
 		taken = first;
-		const double tight_px = tight_for(residual_sigma(object, image, rig, first->pose));
+		measured_sigma_px = residual_sigma(object, image, rig, first->pose);
+		const double tight_px = tight_for(measured_sigma_px);
 		if (params.ransac_threshold_sigmas > 0 && tight_px < params.ransac_threshold_px) {
 			std::optional<PoseFit> second = fit_pose(object, image, rig, params, tight_px, plausible);
 			out.samples += second ? second->samples : 0;
-			if (enough(second))
+			if (enough(second)) {
 				taken = std::move(second);
+				measured_sigma_px = -1;
+			}
 		}
 	}
-	const double sigma = residual_sigma(object, image, rig, taken->pose);
 	out.curr_from_prev = taken->pose;
 	out.threshold_px = taken->threshold_px;
-	double rms = 0;
-	const std::vector<int> inliers = inliers_of(object, image, rig, taken->pose, taken->threshold_px, rms);
-	out.inliers = static_cast<int>(inliers.size());
-	out.rms_px = rms;
-	out.residual_sigma_px = sigma;
-	for (int i : inliers)
+	out.inliers = static_cast<int>(taken->inliers.size());
+	out.rms_px = taken->rms_px;
+	out.residual_sigma_px =
+		measured_sigma_px >= 0 ? measured_sigma_px : residual_sigma(object, image, rig, taken->pose);
+	for (int i : taken->inliers)
 		out.inlier_mask[index[static_cast<size_t>(i)]] = 1;
 	if (out.inliers < params.min_inliers || !std::isfinite(out.curr_from_prev.t[0]) ||
 	    !std::isfinite(out.curr_from_prev.t[1]) || !std::isfinite(out.curr_from_prev.t[2])) {

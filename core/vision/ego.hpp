@@ -30,9 +30,10 @@ namespace stereod::vision {
 struct EgoParams {
 	bool enabled = true;		  ///< estimate the pose when the source is stereo (or RGB-D) and calibrated
 	double ransac_threshold_px = 2.0; ///< PnP RANSAC inlier distance (the first fit's, and the most)
-	/// The fit again with the inlier distance at this many times the first fit's measured noise
-	/// (residual_sigma_px), never under `min_ransac_threshold_px` nor over `ransac_threshold_px`; 0 = one fit.
-	/// When the motion prior carries the previous frame's noise, only the second fit runs.
+	/// The pose fitted with the inlier distance at this many times the measured noise (residual_sigma_px),
+	/// never under `min_ransac_threshold_px` nor over `ransac_threshold_px`; 0 = at `ransac_threshold_px` only.
+	/// The noise is the previous frame's, carried by the motion prior; without it, a first fit at
+	/// `ransac_threshold_px` measures it and a second fit runs at the distance it gives.
 	/// Far points cannot tell a small turn from a sideways step, so only the near static points decide the
 	/// translation, by a pixel or two; at a fixed 2 px a mover walking along the optical axis (its image
 	/// barely moving) and the near points' noise leave the trade free, and it drifted by 10-20 mm per frame
@@ -139,7 +140,7 @@ struct PoseEstimate {
 	/// (a 2-d Gaussian's norm has median 1.1774 sigma): the geometric test's noise when it is measured.
 	double residual_sigma_px = 0;
 	bool prior_used = false; ///< the candidates were gated by the motion prior
-	int samples = 0;	 ///< RANSAC samples drawn (EgoParams::ransac_confidence ends it early), both fits
+	int samples = 0;	 ///< RANSAC samples drawn (EgoParams::ransac_confidence ends it early), every fit
 	double threshold_px = 0; ///< the inlier distance of the fit taken
 };
 
