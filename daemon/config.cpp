@@ -748,10 +748,16 @@ const std::vector<Option> &options()
 			[](DaemonConfig &c) -> int & { return c.motion.groups.split_gap_cells; }, -1, 1000));
 		o.push_back(number(
 			"groups", "split_same_depth",
-			"lk / dis: regions of a cut cluster, and clusters that move alike no farther apart than the "
-			"larger one's longer side, whose median depths agree within this share of the nearer are one "
-			"group (0: depth not looked at)",
+			"regions of a cut cluster (lk / dis), and clusters that move alike no farther apart than the "
+			"larger one's longer side (lk / dis) or merge_reach_m (sparse), whose median depths agree "
+			"within "
+			"this share of the nearer are one group (0: depth not looked at)",
 			[](DaemonConfig &c) -> double & { return c.motion.groups.split_same_depth; }, 0, 10));
+		o.push_back(number(
+			"groups", "merge_reach_m",
+			"sparse flow with depth: clusters that move alike at one depth (split_same_depth) whose boxes "
+			"are at most this many metres apart are one group (0: not joined)",
+			[](DaemonConfig &c) -> double & { return c.motion.groups.merge_reach_m; }, 0, 1000));
 		o.push_back(number(
 			"groups", "neighbours", "Affinity Propagation: messages to this many nearest samples",
 			[](DaemonConfig &c) -> int & { return c.motion.groups.affinity.neighbours; }, 1, 10000));

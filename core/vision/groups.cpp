@@ -230,16 +230,18 @@ std::optional<float> median_depth(const std::vector<uint32_t> &members, const st
 }
 
 /// Clusters that move alike (the join rule on their median residuals) are one when their boxes touch
-/// (within merge_gap_px), or, for the dense flow's cells with depth, when their median depths agree within
-/// split_same_depth of the nearer and the gap between their boxes is no wider than the larger box's longer
-/// side. Affinity Propagation over many samples, whose exemplars only reach their k nearest, cuts a large mover into
-/// pieces; a weakly textured one shows its motion at a few spots apart, all at one depth (the rule
-/// connected_parts applies inside a cluster), where two movers side by side are rarely at one distance.
+/// (within merge_gap_px), or, with depth, when their median depths agree within split_same_depth of the
+/// nearer and the gap between their boxes is no wider than the larger box's longer side (the dense flow's
+/// cells) or merge_reach_m at that depth (feature points, `fx` the rig's focal length; 0: no rig). Affinity Propagation
+/// over many samples, whose exemplars only reach their k nearest, cuts a large mover into pieces; a weakly textured one
+/// shows its motion at a few spots apart, all at one depth (the rule connected_parts applies inside a cluster), where
+/// two movers side by side are rarely at one distance.
 void merge_alike(std::vector<std::vector<uint32_t>> &clusters, const std::vector<MotionPoint> &points,
-		 const GroupParams &params)
+		 const GroupParams &params, double fx)
 {
 	// Each cluster's extent, motion and depth, measured once and again only for a merged one.
-	const bool with_depth = params.member_area_px2 > 0 && params.split_same_depth > 0;
+	const bool cells = params.member_area_px2 > 0;
+	const bool with_depth = params.split_same_depth > 0 && (cells || (params.merge_reach_m > 0 && fx > 0));
 	std::vector<cv::Rect2f> extents;
 	std::vector<cv::Point2f> motion;
 	std::vector<std::optional<float>> depth;
@@ -270,11 +272,15 @@ void merge_alike(std::vector<std::vector<uint32_t>> &clusters, const std::vector
 				if (!join && depth[a] && depth[b] &&
 				    std::abs(*depth[a] - *depth[b]) <=
 					    params.split_same_depth * std::min(*depth[a], *depth[b])) {
-					const double side = std::max({extents[a].width, extents[a].height,
-								      extents[b].width, extents[b].height}) +
-							    2 * params.box_margin_px;
-					join = (grown(extents[a], 0.5 * side) & grown(extents[b], 0.5 * side)).area() >
-					       0;
+					// How far apart the pieces may lie: the grid's, the larger piece's longer side
+					// (stop 29); the feature points', merge_reach_m at the nearer depth.
+					const double reach =
+						cells ? std::max({extents[a].width, extents[a].height, extents[b].width,
+								  extents[b].height}) +
+								2 * params.box_margin_px
+						      : params.merge_reach_m * fx / std::min(*depth[a], *depth[b]);
+					join = (grown(extents[a], 0.5 * reach) & grown(extents[b], 0.5 * reach))
+						       .area() > 0;
 				}
 				if (join) {
 					clusters[a].insert(clusters[a].end(), clusters[b].begin(), clusters[b].end());
@@ -409,7 +415,7 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 				return box_fill(members, points, params) < params.min_box_fill;
 			});
 		}
-		merge_alike(kept, points, params);
+		merge_alike(kept, points, params, context.rig ? context.rig->fx : 0.0);
 		for (auto &members : kept)
 			clusters.push_back(
 				measure(std::move(members), points, context, static_cast<float>(params.box_margin_px)));

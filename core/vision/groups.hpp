@@ -79,6 +79,12 @@ struct GroupParams {
 	/// ... except that regions whose median depths agree within this share of the nearer stay one (stereo
 	/// and RGB-D); 0: depth is not looked at.
 	double split_same_depth = 0.1;
+	/// Feature points (the sparse flow) with depth: clusters that move alike, whose median depths agree
+	/// within `split_same_depth`, and whose boxes are at most this far apart (metres at the nearer depth)
+	/// are one group. Affinity Propagation's nearest-neighbour messages cut a near mover's points into
+	/// pieces a few decimetres apart, and a piece of each then went its own way as a track; 0: not joined.
+	/// (The dense flow's cells keep their own reach, the larger piece's longer side.)
+	double merge_reach_m = 1.0;
 };
 
 /// One temporally matched point as the grouping sees it.

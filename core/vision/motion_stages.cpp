@@ -557,7 +557,12 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 				m.residual = std::isfinite(own.x) ? own : m.flow; // no scene model: standing still
 			const auto p = static_cast<size_t>(matches[i].prev);
 			m.octave = cur.keypoints[c].octave;
-			m.dynamic = classification.labels[i] == PointLabel::Dynamic;
+			// The anchored test's spread counts too: it is output-only like the groups, and a mover walking
+			// along the optical axis is found mostly by it (its image barely moves, its depth does, and
+			// the anchored test confirms a point or two that the spread extends to its neighbours at
+			// the same depth).
+			m.dynamic = classification.labels[i] == PointLabel::Dynamic ||
+				    (i < spread.size() && spread[i] != 0);
 			if (c < cur.xyz.size() && std::isfinite(cur.xyz[c][2]))
 				m.xyz = cur.xyz[c];
 			if (p < prev->xyz.size() && std::isfinite(prev->xyz[p][2]))

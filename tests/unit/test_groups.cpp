@@ -423,3 +423,53 @@ TEST(Groups, LabelMembersAreTheDynamicPointsWithAResidual)
 	params.members = GroupMembers::Flow;
 	EXPECT_EQ(strong_motion(points, params), std::vector<uint32_t>{0});
 }
+
+TEST(Groups, PiecesOfANearMoverAtOneDepthAreOneGroup)
+{
+	// Two pieces of one near mover, 12 feature points each, moving alike 5 px per frame, `gap` px apart: too
+	// far for the seed's samples (position scale 40 px) to fall in one cluster or for the boxes to touch. With
+	// depth they are one group when they lie at one depth and the gap is within merge_reach_m (1 m) there
+	// (fx 900: 300 px at 3 m); two when the depths differ (3 m and 5 m), without depth, or 1.5 m apart.
+	struct Case {
+		float gap;
+		float depth_b; // piece B's depth; A's is 3 m; 0: no depth anywhere
+		double reach_m;
+		size_t groups;
+	};
+	geometry::StereoRig rig;
+	rig.fx = rig.fy = 900;
+	rig.cx = 320;
+	rig.cy = 240;
+	rig.baseline_m = 0.12;
+	for (const Case c : {Case{150, 3, 1.0, 1}, Case{150, 5, 1.0, 2}, Case{150, 0, 1.0, 2}, Case{450, 3, 1.0, 2},
+			     Case{150, 3, 0.0, 2}}) {
+		GroupParams params;
+		params.members = GroupMembers::Labels;
+		params.merge_reach_m = c.reach_m;
+		GroupMotionContext context;
+		context.dt_s = 0.1;
+		context.rig = rig;
+		AffinityPropagation workspace;
+		std::vector<MotionPoint> points;
+		for (int piece = 0; piece < 2; ++piece)
+			for (int i = 0; i < 12; ++i) {
+				MotionPoint p;
+				const float x0 = piece == 0 ? 20.F : 20.F + 30.F + c.gap;
+				p.px = {x0 + static_cast<float>(i % 3) * 15.F,
+					150.F + static_cast<float>(i / 3) * 30.F};
+				p.flow = p.residual = {5.F, 0.F};
+				p.dynamic = true;
+				const float z = piece == 0 ? 3.F : c.depth_b;
+				if (c.depth_b > 0)
+					p.xyz = cv::Vec3f(static_cast<float>((p.px.x - rig.cx) * z / rig.fx),
+							  static_cast<float>((p.px.y - rig.cy) * z / rig.fy), z);
+				points.push_back(p);
+			}
+		const GroupOutput first = find_groups(points, nullptr, context, params, workspace);
+		for (auto &p : points)
+			p.px.x += 5.F;
+		const GroupOutput out = find_groups(points, &first.memory, context, params, workspace);
+		EXPECT_EQ(out.groups.size(), c.groups)
+			<< "gap " << c.gap << " px, depth " << c.depth_b << " m, reach " << c.reach_m << " m";
+	}
+}
