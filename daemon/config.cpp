@@ -758,6 +758,10 @@ const std::vector<Option> &options()
 			"sparse flow with depth: clusters that move alike at one depth (split_same_depth) whose boxes "
 			"are at most this many metres apart are one group (0: not joined)",
 			[](DaemonConfig &c) -> double & { return c.motion.groups.merge_reach_m; }, 0, 1000));
+		o.push_back(
+			boolean("groups", "regroup_unplaced",
+				"the points the clustering placed in no group are clustered once more among themselves",
+				[](DaemonConfig &c) -> bool & { return c.motion.groups.regroup_unplaced; }));
 		o.push_back(number(
 			"groups", "neighbours", "Affinity Propagation: messages to this many nearest samples",
 			[](DaemonConfig &c) -> int & { return c.motion.groups.affinity.neighbours; }, 1, 10000));

@@ -348,6 +348,80 @@ void join_groups(const std::vector<MotionPoint> &points, const GroupOutput &foun
 	}
 }
 
+namespace {
+
+/// What one round of clustering reports.
+struct ClusterRound {
+	int clusters = 0;
+	int iterations = 0;
+	double preference = 0; ///< Affinity Propagation's, as used
+};
+
+/// One round of clustering over the points `chosen`: seed 002's samples, Affinity Propagation, clusters
+/// under min_points dropped, members that do not move like their cluster's median taken out, and a grid's
+/// cells cut into connected regions. The clusters left are appended to `kept`; the points in none of them
+/// go to `unplaced` when it is given.
+ClusterRound cluster_round(const std::vector<uint32_t> &chosen, const std::vector<MotionPoint> &points,
+			   const GroupMotionContext &context, const GroupParams &params, const AffinityParams &affinity,
+			   AffinityPropagation &workspace, std::vector<std::vector<uint32_t>> &kept,
+			   std::vector<uint32_t> *unplaced)
+{
+	// Seed 002's 6-d samples, each dimension over its scale: octave, row, column, disparity, flow u, flow v.
+	cv::Mat samples(static_cast<int>(chosen.size()), 6, CV_32F);
+	for (size_t s = 0; s < chosen.size(); ++s) {
+		const MotionPoint &p = points[chosen[s]];
+		float disparity = 0;
+		if (p.xyz && context.rig && (*p.xyz)[2] > 0)
+			disparity = static_cast<float>(context.rig->fx * context.rig->baseline_m / (*p.xyz)[2]);
+		float *row = samples.ptr<float>(static_cast<int>(s));
+		row[0] = static_cast<float>(p.octave / params.octave_scale);
+		row[1] = static_cast<float>(p.px.y / params.position_scale_px);
+		row[2] = static_cast<float>(p.px.x / params.position_scale_px);
+		row[3] = static_cast<float>(disparity / params.disparity_scale_px);
+		row[4] = static_cast<float>(p.flow.x / params.flow_scale_px);
+		row[5] = static_cast<float>(p.flow.y / params.flow_scale_px);
+	}
+	const AffinityResult &ap = workspace.cluster(samples, affinity);
+	const ClusterRound round{ap.clusters, ap.iterations, ap.preference};
+	std::vector<std::vector<uint32_t>> by_exemplar(chosen.size());
+	for (size_t s = 0; s < chosen.size(); ++s)
+		by_exemplar[static_cast<size_t>(ap.exemplar[s])].push_back(chosen[s]);
+	const auto min_points = static_cast<size_t>(std::max(1, params.min_points));
+	const auto place = [&](std::vector<uint32_t> &&part) {
+		if (part.size() >= min_points)
+			kept.push_back(std::move(part));
+		else if (unplaced != nullptr)
+			unplaced->insert(unplaced->end(), part.begin(), part.end());
+	};
+	for (auto &members : by_exemplar) {
+		if (members.size() < min_points) {
+			if (unplaced != nullptr)
+				unplaced->insert(unplaced->end(), members.begin(), members.end());
+			continue;
+		}
+		// Members that do not move like the cluster's median (a flow that bled onto the background around
+		// a mover, a stray point the clustering took along) leave it, by the rule points join a group by
+		// (join_groups), so that the box and the velocities are the movers'.
+		const cv::Point2f median = median_residual(members, points);
+		const auto leaves = std::stable_partition(members.begin(), members.end(), [&](uint32_t i) {
+			return moves_with(points[i].residual, median, params.member_tolerance_px);
+		});
+		if (unplaced != nullptr)
+			unplaced->insert(unplaced->end(), leaves, members.end());
+		members.erase(leaves, members.end());
+		if (params.member_area_px2 > 0 && params.split_gap_cells >= 0) {
+			for (auto &part : connected_parts(members, points, std::sqrt(params.member_area_px2),
+							  params.split_gap_cells, params.split_same_depth))
+				place(std::move(part));
+		} else {
+			place(std::move(members));
+		}
+	}
+	return round;
+}
+
+} // namespace
+
 GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemory *previous,
 			const GroupMotionContext &context, const GroupParams &params, AffinityPropagation &workspace,
 			const std::vector<uint32_t> *strong)
@@ -364,49 +438,25 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 			thinned.push_back(chosen[static_cast<size_t>(k * step)]);
 		chosen = std::move(thinned);
 	}
-	// Seed 002's 6-d samples, each dimension over its scale: octave, row, column, disparity, flow u, flow v.
-	cv::Mat samples(static_cast<int>(chosen.size()), 6, CV_32F);
-	for (size_t s = 0; s < chosen.size(); ++s) {
-		const MotionPoint &p = points[chosen[s]];
-		float disparity = 0;
-		if (p.xyz && context.rig && (*p.xyz)[2] > 0)
-			disparity = static_cast<float>(context.rig->fx * context.rig->baseline_m / (*p.xyz)[2]);
-		float *row = samples.ptr<float>(static_cast<int>(s));
-		row[0] = static_cast<float>(p.octave / params.octave_scale);
-		row[1] = static_cast<float>(p.px.y / params.position_scale_px);
-		row[2] = static_cast<float>(p.px.x / params.position_scale_px);
-		row[3] = static_cast<float>(disparity / params.disparity_scale_px);
-		row[4] = static_cast<float>(p.flow.x / params.flow_scale_px);
-		row[5] = static_cast<float>(p.flow.y / params.flow_scale_px);
-	}
 	std::vector<Cluster> clusters;
 	if (!chosen.empty()) {
-		const AffinityResult &ap = workspace.cluster(samples, params.affinity);
-		out.clusters = ap.clusters;
-		out.ap_iterations = ap.iterations;
-		std::vector<std::vector<uint32_t>> by_exemplar(chosen.size());
-		for (size_t s = 0; s < chosen.size(); ++s)
-			by_exemplar[static_cast<size_t>(ap.exemplar[s])].push_back(chosen[s]);
-		const auto min_points = static_cast<size_t>(std::max(1, params.min_points));
 		std::vector<std::vector<uint32_t>> kept;
-		for (auto &members : by_exemplar) {
-			if (members.size() < min_points)
-				continue;
-			// Members that do not move like the cluster's median (a flow that bled onto the background
-			// around a mover, a stray point the clustering took along) leave it, by the rule points join
-			// a group by (join_groups), so that the box and the velocities are the movers'.
-			const cv::Point2f median = median_residual(members, points);
-			std::erase_if(members, [&](uint32_t i) {
-				return !moves_with(points[i].residual, median, params.member_tolerance_px);
-			});
-			if (params.member_area_px2 > 0 && params.split_gap_cells >= 0) {
-				for (auto &part : connected_parts(members, points, std::sqrt(params.member_area_px2),
-								  params.split_gap_cells, params.split_same_depth))
-					if (part.size() >= min_points)
-						kept.push_back(std::move(part));
-			} else if (members.size() >= min_points) {
-				kept.push_back(std::move(members));
-			}
+		std::vector<uint32_t> unplaced;
+		const ClusterRound first = cluster_round(chosen, points, context, params, params.affinity, workspace,
+							 kept, params.regroup_unplaced ? &unplaced : nullptr);
+		out.clusters = first.clusters;
+		out.ap_iterations = first.iterations;
+		// The points the first round placed in no group cluster once more among themselves: a small mover
+		// (a few points) beside a large one is among the large one's nearest samples, so Affinity
+		// Propagation hands it the large one's exemplar, and the member rule then takes it out again. At
+		// the first round's preference: the seed's, from the farthest pair among these points alone, would
+		// cut a lone small mover into pieces under min_points.
+		if (unplaced.size() >= static_cast<size_t>(std::max(1, params.min_points))) {
+			AffinityParams again = params.affinity;
+			again.preference = first.preference;
+			out.ap_iterations +=
+				cluster_round(unplaced, points, context, params, again, workspace, kept, nullptr)
+					.iterations;
 		}
 		// The fill rule on each piece before the merge: pieces of one mover joined across the gaps between
 		// them fill their common box less than each its own.

@@ -85,6 +85,9 @@ struct GroupParams {
 	/// pieces a few decimetres apart, and a piece of each then went its own way as a track; 0: not joined.
 	/// (The dense flow's cells keep their own reach, the larger piece's longer side.)
 	double merge_reach_m = 1.0;
+	/// The points the clustering placed in no group (in a cluster under min_points, or taken out of theirs
+	/// by the member rule) are clustered once more among themselves.
+	bool regroup_unplaced = true;
 };
 
 /// One temporally matched point as the grouping sees it.

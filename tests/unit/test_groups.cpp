@@ -473,3 +473,52 @@ TEST(Groups, PiecesOfANearMoverAtOneDepthAreOneGroup)
 			<< "gap " << c.gap << " px, depth " << c.depth_b << " m, reach " << c.reach_m << " m";
 	}
 }
+
+TEST(Groups, ASmallMoverBesideALargeOneIsClusteredAgain)
+{
+	// A large mover (40 points moving 6 px per frame) and, 30 px to its right, a small one (6 points moving
+	// 1.5 px per frame the other way), with a third mover 500 px off that makes the seed's preference (the
+	// farthest pair's similarity) low. Among the small one's 24 nearest samples most are the large one's,
+	// so Affinity Propagation gives it the large one's exemplar and the member rule takes it out again; the
+	// points placed in no group are clustered once more among themselves and make a group of their own.
+	std::vector<MotionPoint> points;
+	for (int i = 0; i < 40; ++i) {
+		MotionPoint p;
+		p.px = {100.F + static_cast<float>(i % 8) * 10.F, 200.F + static_cast<float>(i / 8) * 10.F};
+		p.flow = p.residual = {6.F, 0.F};
+		p.dynamic = true;
+		points.push_back(p);
+	}
+	for (int i = 0; i < 6; ++i) {
+		MotionPoint p;
+		p.px = {100.F + 70.F + 30.F + static_cast<float>(i % 2) * 10.F,
+			210.F + static_cast<float>(i / 2) * 10.F};
+		p.flow = p.residual = {-1.5F, 0.F};
+		p.dynamic = true;
+		points.push_back(p);
+	}
+	for (int i = 0; i < 20; ++i) {
+		MotionPoint p;
+		p.px = {700.F + static_cast<float>(i % 5) * 10.F, 400.F + static_cast<float>(i / 5) * 10.F};
+		p.flow = p.residual = {-6.F, 0.F};
+		p.dynamic = true;
+		points.push_back(p);
+	}
+	for (const bool regroup : {false, true}) {
+		GroupParams params;
+		params.members = GroupMembers::Labels; // the classifier's dynamic points, slow ones included
+		params.regroup_unplaced = regroup;
+		GroupMotionContext context;
+		context.dt_s = 0.1;
+		AffinityPropagation workspace;
+		const GroupOutput first = find_groups(points, nullptr, context, params, workspace);
+		const GroupOutput out = find_groups(points, &first.memory, context, params, workspace);
+		ASSERT_EQ(out.groups.size(), regroup ? 3u : 2u) << "regroup " << regroup;
+		const auto small = std::find_if(out.groups.begin(), out.groups.end(),
+						[](const TargetGroup &g) { return g.point_count == 6; });
+		EXPECT_EQ(small != out.groups.end(), regroup) << "regroup " << regroup;
+		if (small != out.groups.end()) {
+			EXPECT_LT(small->image_velocity_pxps[0], 0.F);
+		}
+	}
+}
