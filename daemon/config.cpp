@@ -750,8 +750,7 @@ const std::vector<Option> &options()
 			"groups", "split_same_depth",
 			"regions of a cut cluster (lk / dis), and clusters that move alike no farther apart than the "
 			"larger one's longer side (lk / dis) or merge_reach_m (sparse), whose median depths agree "
-			"within "
-			"this share of the nearer are one group (0: depth not looked at)",
+			"within this share of the nearer are one group (0: depth not looked at)",
 			[](DaemonConfig &c) -> double & { return c.motion.groups.split_same_depth; }, 0, 10));
 		o.push_back(number(
 			"groups", "merge_reach_m",

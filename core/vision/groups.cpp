@@ -232,10 +232,10 @@ std::optional<float> median_depth(const std::vector<uint32_t> &members, const st
 /// Clusters that move alike (the join rule on their median residuals) are one when their boxes touch
 /// (within merge_gap_px), or, with depth, when their median depths agree within split_same_depth of the
 /// nearer and the gap between their boxes is no wider than the larger box's longer side (the dense flow's
-/// cells) or merge_reach_m at that depth (feature points, `fx` the rig's focal length; 0: no rig). Affinity Propagation
-/// over many samples, whose exemplars only reach their k nearest, cuts a large mover into pieces; a weakly textured one
-/// shows its motion at a few spots apart, all at one depth (the rule connected_parts applies inside a cluster), where
-/// two movers side by side are rarely at one distance.
+/// cells) or merge_reach_m at that depth (feature points; `fx` is the rig's focal length, 0 without a rig).
+/// Affinity Propagation over many samples, whose exemplars only reach their k nearest, cuts a large mover
+/// into pieces; a weakly textured one shows its motion at a few spots apart, all at one depth (the rule
+/// connected_parts applies inside a cluster), where two movers side by side are rarely at one distance.
 void merge_alike(std::vector<std::vector<uint32_t>> &clusters, const std::vector<MotionPoint> &points,
 		 const GroupParams &params, double fx)
 {
@@ -350,6 +350,12 @@ void join_groups(const std::vector<MotionPoint> &points, const GroupOutput &foun
 
 namespace {
 
+/// The fewest points a cluster needs to be a group (min_points, at least 1).
+size_t min_group_points(const GroupParams &params)
+{
+	return static_cast<size_t>(std::max(1, params.min_points));
+}
+
 /// What one round of clustering reports.
 struct ClusterRound {
 	int clusters = 0;
@@ -386,7 +392,7 @@ ClusterRound cluster_round(const std::vector<uint32_t> &chosen, const std::vecto
 	std::vector<std::vector<uint32_t>> by_exemplar(chosen.size());
 	for (size_t s = 0; s < chosen.size(); ++s)
 		by_exemplar[static_cast<size_t>(ap.exemplar[s])].push_back(chosen[s]);
-	const auto min_points = static_cast<size_t>(std::max(1, params.min_points));
+	const size_t min_points = min_group_points(params);
 	const auto place = [&](std::vector<uint32_t> &&part) {
 		if (part.size() >= min_points)
 			kept.push_back(std::move(part));
@@ -451,7 +457,7 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 		// Propagation hands it the large one's exemplar, and the member rule then takes it out again. At
 		// the first round's preference: the seed's, from the farthest pair among these points alone, would
 		// cut a lone small mover into pieces under min_points.
-		if (unplaced.size() >= static_cast<size_t>(std::max(1, params.min_points))) {
+		if (unplaced.size() >= min_group_points(params)) {
 			AffinityParams again = params.affinity;
 			again.preference = first.preference;
 			out.ap_iterations +=

@@ -136,7 +136,7 @@ struct GroupOutput {
 	std::vector<uint32_t> strong;	    ///< indices of the strongly moving points
 	std::vector<int> group_of_point;    ///< per point: index into `groups`, or -1
 	std::vector<cv::Point2f> residuals; ///< per published group: its members' median residual
-	int clusters = 0;		    ///< AP clusters this frame (before the size and age rules)
+	int clusters = 0;		    ///< AP clusters this frame, first round (before the size and age rules)
 	int ap_iterations = 0;
 };
 
