@@ -4,6 +4,7 @@
 #include <cmath>
 #include <numeric>
 
+#include "core/clock.hpp"
 #include "core/vision/stereo.hpp"
 
 namespace stereod::vision {
@@ -360,7 +361,8 @@ size_t min_group_points(const GroupParams &params)
 struct ClusterRound {
 	int clusters = 0;
 	int iterations = 0;
-	double preference = 0; ///< Affinity Propagation's, as used
+	double preference = 0;	  ///< Affinity Propagation's, as used
+	double clustering_ms = 0; ///< Affinity Propagation's own time
 };
 
 /// One round of clustering over the points `chosen`: seed 002's samples, Affinity Propagation, clusters
@@ -387,8 +389,10 @@ ClusterRound cluster_round(const std::vector<uint32_t> &chosen, const std::vecto
 		row[4] = static_cast<float>(p.flow.x / params.flow_scale_px);
 		row[5] = static_cast<float>(p.flow.y / params.flow_scale_px);
 	}
+	const int64_t start_ns = monotonic_ns();
 	const AffinityResult &ap = workspace.cluster(samples, affinity);
-	const ClusterRound round{ap.clusters, ap.iterations, ap.preference};
+	const ClusterRound round{ap.clusters, ap.iterations, ap.preference,
+				 static_cast<double>(monotonic_ns() - start_ns) * 1e-6};
 	std::vector<std::vector<uint32_t>> by_exemplar(chosen.size());
 	for (size_t s = 0; s < chosen.size(); ++s)
 		by_exemplar[static_cast<size_t>(ap.exemplar[s])].push_back(chosen[s]);
@@ -452,6 +456,7 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 							 kept, params.regroup_unplaced ? &unplaced : nullptr);
 		out.clusters = first.clusters;
 		out.ap_iterations = first.iterations;
+		out.clustering_ms = first.clustering_ms;
 		// The points the first round placed in no group cluster once more among themselves: a small mover
 		// (a few points) beside a large one is among the large one's nearest samples, so Affinity
 		// Propagation hands it the large one's exemplar, and the member rule then takes it out again. At
@@ -460,9 +465,10 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 		if (unplaced.size() >= min_group_points(params)) {
 			AffinityParams again = params.affinity;
 			again.preference = first.preference;
-			out.ap_iterations +=
-				cluster_round(unplaced, points, context, params, again, workspace, kept, nullptr)
-					.iterations;
+			const ClusterRound second =
+				cluster_round(unplaced, points, context, params, again, workspace, kept, nullptr);
+			out.ap_iterations += second.iterations;
+			out.clustering_ms += second.clustering_ms;
 		}
 		// The fill rule on each piece before the merge: pieces of one mover joined across the gaps between
 		// them fill their common box less than each its own.

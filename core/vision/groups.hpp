@@ -138,6 +138,7 @@ struct GroupOutput {
 	std::vector<cv::Point2f> residuals; ///< per published group: its members' median residual
 	int clusters = 0;		    ///< AP clusters this frame, first round (before the size and age rules)
 	int ap_iterations = 0;
+	double clustering_ms = 0; ///< Affinity Propagation's time alone, both rounds (the issue's cap is on it)
 };
 
 /// The seed's split: indices of points whose residual exceeds the mean |u| or mean |v| residual of all of
