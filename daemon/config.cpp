@@ -692,6 +692,11 @@ const std::vector<Option> &options()
 			"lk: weaker gradients (minimum eigenvalue) carry no motion (seed 002: 0.001)",
 			[](DaemonConfig &c) -> double & { return c.motion.dense.lk_min_eigen; }, 0, 1));
 		o.push_back(number(
+			"groups", "aperture_ratio",
+			"lk / dis: a cell whose gradients run one way (smaller/larger eigenvalue under this) counts "
+			"only its residual across them (0: off)",
+			[](DaemonConfig &c) -> double & { return c.motion.dense.aperture_ratio; }, 0, 1));
+		o.push_back(number(
 			"groups", "max_round_trip_px",
 			"lk / dis: a cell's flow followed back must land this close to its start (0: no check)",
 			[](DaemonConfig &c) -> double & { return c.motion.dense.max_round_trip_px; }, 0, 1000));

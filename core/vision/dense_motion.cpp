@@ -14,6 +14,47 @@ namespace {
 
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 
+/// Per cell: the unit direction across the edges of the window at its centre in `image` (the structure
+/// tensor's eigenvector of the larger eigenvalue), where the smaller eigenvalue is under `ratio` times the
+/// larger; (0, 0) elsewhere.
+std::vector<cv::Point2f> edge_directions(const cv::Mat &image, int cols, int rows, double to_full_x, double to_full_y,
+					 int window, double ratio)
+{
+	std::vector<cv::Point2f> across(static_cast<size_t>(cols) * static_cast<size_t>(rows), cv::Point2f(0, 0));
+	cv::Mat gx, gy;
+	cv::Sobel(image, gx, CV_32F, 1, 0, 3);
+	cv::Sobel(image, gy, CV_32F, 0, 1, 3);
+	const int half = window / 2;
+	const double step_x = static_cast<double>(image.cols) / cols, step_y = static_cast<double>(image.rows) / rows;
+	for (int r = 0; r < rows; ++r)
+		for (int c = 0; c < cols; ++c) {
+			const int x0 = static_cast<int>((c + 0.5) * step_x), y0 = static_cast<int>((r + 0.5) * step_y);
+			double xx = 0, xy = 0, yy = 0;
+			for (int y = std::max(y0 - half, 0); y <= std::min(y0 + half, image.rows - 1); ++y) {
+				const auto *dx = gx.ptr<float>(y);
+				const auto *dy = gy.ptr<float>(y);
+				for (int x = std::max(x0 - half, 0); x <= std::min(x0 + half, image.cols - 1); ++x) {
+					xx += dx[x] * dx[x];
+					xy += dx[x] * dy[x];
+					yy += dy[x] * dy[x];
+				}
+			}
+			// Eigenvalues of [[xx, xy], [xy, yy]]; the larger one's eigenvector is the way across the
+			// edges.
+			const double mean = 0.5 * (xx + yy), spread = std::hypot(0.5 * (xx - yy), xy);
+			const double large = mean + spread, small = mean - spread;
+			if (!(large > 0) || small >= ratio * large)
+				continue;
+			// In full-resolution pixels the direction is the same when both axes scale alike (they do: the
+			// flow image is the left image resized by one factor); scaled per axis to stay exact otherwise.
+			const double angle = 0.5 * std::atan2(2 * xy, xx - yy);
+			cv::Point2d dir(std::cos(angle) / to_full_x, std::sin(angle) / to_full_y);
+			dir /= std::hypot(dir.x, dir.y);
+			across[static_cast<size_t>(r * cols + c)] = cv::Point2f(dir);
+		}
+	return across;
+}
+
 } // namespace
 
 cv::Mat dense_flow_image(const cv::Mat &grey, const DenseFlowParams &params)
@@ -41,6 +82,9 @@ CellFlow dense_flow(const cv::Mat &prev, const cv::Mat &cur, cv::Size full_size,
 		return cells;
 	const double to_full_x = static_cast<double>(full_size.width) / cur.cols;
 	const double to_full_y = static_cast<double>(full_size.height) / cur.rows;
+	if (params.aperture_ratio > 0)
+		cells.across = edge_directions(prev, cells.cols, cells.rows, to_full_x, to_full_y,
+					       std::max(params.lk_window, 3), params.aperture_ratio);
 	if (params.method == GroupFlow::Dis) {
 		if (!dis)
 			dis = cv::DISOpticalFlow::create(cv::DISOpticalFlow::PRESET_ULTRAFAST);
@@ -208,6 +252,8 @@ std::vector<MotionPoint> cell_motion(const CellFlow &cells, const DenseFlowParam
 						m.xyz = cv::Vec3f(model.rig->back_project(m.px.x, m.px.y, z));
 				}
 			}
+			if (i < cells.across.size())
+				m.across = cells.across[i];
 			if (cells.valid[i] == 0) // kept in place (index = cell), out of the split and the groups
 				m.residual = cv::Point2f(kNaN, kNaN);
 			points.push_back(m);

@@ -50,6 +50,10 @@ struct DenseFlowParams {
 	/// Labels: a feature point on a cell a group holds joins the group when it has a residual of its own of
 	/// at least half groups.min_flow_px, however far that is from the group's (join_by_cells).
 	bool label_cells = true;
+	/// A cell whose gradients run mostly one way (the smaller eigenvalue of its structure tensor under this
+	/// share of the larger: an edge, a streak) has a trustworthy flow only across that way (the aperture
+	/// problem); its residual keeps only that component. 0: every residual whole.
+	double aperture_ratio = 0;
 };
 
 /// The image the dense flow runs on: the grey left image scaled by params.scale.
@@ -62,6 +66,9 @@ struct CellFlow {
 	int cols = 0, rows = 0;
 	std::vector<cv::Point2f> flow; ///< per cell, from the previous frame to this one
 	std::vector<uint8_t> valid;    ///< the flow was measured (LK converged, or DIS)
+	/// With aperture_ratio set: per cell, the unit direction across its edges, or (0, 0) where the cell's
+	/// gradients run both ways (its whole flow is measured).
+	std::vector<cv::Point2f> across;
 };
 CellFlow dense_flow(const cv::Mat &prev, const cv::Mat &cur, cv::Size full_size, const DenseFlowParams &params,
 		    cv::Ptr<cv::DISOpticalFlow> &dis);

@@ -324,7 +324,11 @@ std::vector<uint32_t> strong_motion(const std::vector<MotionPoint> &points, cons
 	mean_u /= static_cast<double>(measured);
 	mean_v /= static_cast<double>(measured);
 	for (size_t i = 0; i < points.size(); ++i) {
-		const cv::Point2f r = points[i].residual;
+		const MotionPoint &p = points[i];
+		// Along an edge the flow is not measured, so neither is the residual: a static edge whose flow
+		// slid along it must not pass for a mover.
+		const cv::Point2f r =
+			p.across.x != 0 || p.across.y != 0 ? p.across * p.residual.dot(p.across) : p.residual;
 		if ((std::abs(r.x) > mean_u || std::abs(r.y) > mean_v) && std::hypot(r.x, r.y) >= params.min_flow_px)
 			strong.push_back(static_cast<uint32_t>(i));
 	}

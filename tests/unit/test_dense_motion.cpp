@@ -2,6 +2,7 @@
 // a moving textured patch over a still textured background is the one group, cells get the depth of the
 // stereo points around them, lone strong cells are dropped, and feature points join a group only when they
 // move with it.
+#include <cmath>
 #include <functional>
 #include <random>
 
@@ -137,6 +138,41 @@ TEST(DenseFlow, StillImagesHaveNoStrongCell)
 	const std::vector<MotionPoint> points = cell_motion(cells, params, {}, {}, {});
 	GroupParams group_params;
 	EXPECT_TRUE(strong_motion(points, group_params).empty());
+}
+
+TEST(DenseFlow, CellsOnStripesAreOnAnEdge)
+{
+	// The left half vertical stripes (the grey level changes along x only), the right half texture: with
+	// aperture_ratio set, the stripes' cells have the direction across their edges, sideways, and the
+	// textured cells none; with it off, no cell has one.
+	const cv::Size size(320, 240);
+	cv::Mat image = texture(size, 9);
+	for (int y = 0; y < size.height; ++y)
+		for (int x = 0; x < size.width / 2; ++x)
+			image.at<uint8_t>(y, x) = cv::saturate_cast<uint8_t>(128 + 100 * std::sin(x * 0.4));
+	DenseFlowParams params;
+	params.method = GroupFlow::PyrLk;
+	params.aperture_ratio = 0.1;
+	cv::Ptr<cv::DISOpticalFlow> dis;
+	const cv::Mat small = dense_flow_image(image, params);
+	const CellFlow cells = dense_flow(small, small, image.size(), params, dis);
+	ASSERT_EQ(cells.across.size(), cells.flow.size());
+	int stripes = 0, on_edge = 0, textured = 0, off_edge = 0;
+	for (int r = 1; r + 1 < cells.rows; ++r)
+		for (int c = 1; c + 1 < cells.cols; ++c) {
+			const cv::Point2f a = cells.across[static_cast<size_t>(r * cells.cols + c)];
+			if ((c + 1) * params.step_px < size.width / 2 - 8) {
+				++stripes;
+				on_edge += std::abs(a.x) > 0.99F && std::abs(a.y) < 0.1F ? 1 : 0;
+			} else if (c * params.step_px > size.width / 2 + 8) {
+				++textured;
+				off_edge += a.x == 0 && a.y == 0 ? 1 : 0;
+			}
+		}
+	EXPECT_GE(on_edge, stripes * 9 / 10) << on_edge << " of " << stripes << " stripe cells";
+	EXPECT_GE(off_edge, textured * 9 / 10) << off_edge << " of " << textured << " textured cells";
+	params.aperture_ratio = 0;
+	EXPECT_TRUE(dense_flow(small, small, image.size(), params, dis).across.empty());
 }
 
 TEST(DenseFlow, MovingPatchIsTheOneGroup)

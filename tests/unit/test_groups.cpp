@@ -424,6 +424,26 @@ TEST(Groups, LabelMembersAreTheDynamicPointsWithAResidual)
 	EXPECT_EQ(strong_motion(points, params), std::vector<uint32_t>{0});
 }
 
+TEST(Groups, AResidualAlongAnEdgeIsNotStrongMotion)
+{
+	// Twenty still points and three with the same 5 px sideways residual: one on a vertical edge (its
+	// across direction is sideways: the residual is measured), one on a horizontal edge (across is up and
+	// down: the sideways residual is along the edge, not measured), one with no edge.
+	std::vector<MotionPoint> points(23);
+	for (auto &p : points)
+		p.residual = {0, 0};
+	for (size_t i = 20; i < 23; ++i)
+		points[i].residual = {5, 0};
+	points[20].across = {1, 0};
+	points[21].across = {0, 1};
+	GroupParams params;
+	params.members = GroupMembers::Flow;
+	EXPECT_EQ(strong_motion(points, params), (std::vector<uint32_t>{20, 22}));
+	// Across at 45 degrees keeps 5 / sqrt(2) = 3.5 px of it: still strong.
+	points[21].across = {0.70710678F, 0.70710678F};
+	EXPECT_EQ(strong_motion(points, params), (std::vector<uint32_t>{20, 21, 22}));
+}
+
 TEST(Groups, PiecesOfANearMoverAtOneDepthAreOneGroup)
 {
 	// Two pieces of one near mover, 12 feature points each, moving alike 5 px per frame, `gap` px apart: too
