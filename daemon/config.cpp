@@ -693,8 +693,8 @@ const std::vector<Option> &options()
 			[](DaemonConfig &c) -> double & { return c.motion.dense.lk_min_eigen; }, 0, 1));
 		o.push_back(number(
 			"groups", "aperture_ratio",
-			"lk / dis: a cell whose gradients run one way (smaller/larger eigenvalue under this) counts "
-			"only its residual across them (0: off)",
+			"lk / dis: a cell whose gradients run one way (smaller/larger eigenvalue under this) is on an "
+			"edge; a group mostly of cells that moved only along their edges is dropped (0: off)",
 			[](DaemonConfig &c) -> double & { return c.motion.dense.aperture_ratio; }, 0, 1));
 		o.push_back(number(
 			"groups", "max_round_trip_px",

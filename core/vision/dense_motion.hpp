@@ -52,8 +52,9 @@ struct DenseFlowParams {
 	bool label_cells = true;
 	/// A cell whose gradients run mostly one way (the smaller eigenvalue of its structure tensor under this
 	/// share of the larger: an edge, a streak) has a trustworthy flow only across that way (the aperture
-	/// problem); its residual keeps only that component. 0: every residual whole.
-	double aperture_ratio = 0;
+	/// problem): CellFlow::across, and a group made mostly of cells that moved only along their edges is
+	/// dropped (find_groups). 0: no cell is on an edge.
+	double aperture_ratio = 0.15;
 };
 
 /// The image the dense flow runs on: the grey left image scaled by params.scale.

@@ -324,11 +324,7 @@ std::vector<uint32_t> strong_motion(const std::vector<MotionPoint> &points, cons
 	mean_u /= static_cast<double>(measured);
 	mean_v /= static_cast<double>(measured);
 	for (size_t i = 0; i < points.size(); ++i) {
-		const MotionPoint &p = points[i];
-		// Along an edge the flow is not measured, so neither is the residual: a static edge whose flow
-		// slid along it must not pass for a mover.
-		const cv::Point2f r =
-			p.across.x != 0 || p.across.y != 0 ? p.across * p.residual.dot(p.across) : p.residual;
+		const cv::Point2f r = points[i].residual;
 		if ((std::abs(r.x) > mean_u || std::abs(r.y) > mean_v) && std::hypot(r.x, r.y) >= params.min_flow_px)
 			strong.push_back(static_cast<uint32_t>(i));
 	}
@@ -354,6 +350,13 @@ void join_groups(const std::vector<MotionPoint> &points, const GroupOutput &foun
 }
 
 namespace {
+
+/// On an edge (`across` set), with a residual across it under `min_flow_px`: whatever the point's whole
+/// residual, the part the flow measured says it stands still.
+bool slides_along_edge(const MotionPoint &p, double min_flow_px)
+{
+	return (p.across.x != 0 || p.across.y != 0) && std::abs(p.residual.dot(p.across)) < min_flow_px;
+}
 
 /// The fewest points a cluster needs to be a group (min_points, at least 1).
 size_t min_group_points(const GroupParams &params)
@@ -481,6 +484,15 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 				return box_fill(members, points, params) < params.min_box_fill;
 			});
 		}
+		// A piece most of whose members moved only along their edges is the aperture problem's, not a
+		// mover's: a streaky patch of the static scene whose flow slid along the streaks as the camera
+		// turned. A mover's cells on edges are a minority among its textured ones.
+		std::erase_if(kept, [&](const std::vector<uint32_t> &members) {
+			const auto sliding = std::count_if(members.begin(), members.end(), [&](uint32_t m) {
+				return slides_along_edge(points[m], params.min_flow_px);
+			});
+			return 2 * static_cast<size_t>(sliding) > members.size();
+		});
 		merge_alike(kept, points, params, context.rig ? context.rig->fx : 0.0);
 		for (auto &members : kept)
 			clusters.push_back(

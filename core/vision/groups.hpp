@@ -100,8 +100,8 @@ struct MotionPoint {
 	std::optional<cv::Vec3f> prev_xyz; ///< the previous frame's camera, metres
 	bool dynamic = false;		   ///< the classifier's label (GroupMembers::Labels)
 	/// Where only part of the motion is measured (a grid cell on an edge: the aperture problem), the unit
-	/// direction across the edge; strong_motion then judges only the residual's component that way. (0, 0):
-	/// the whole residual is measured.
+	/// direction across the edge; (0, 0): the whole residual is measured. find_groups drops a cluster most
+	/// of whose members have a residual across their edge under min_flow_px.
 	cv::Point2f across{0, 0};
 };
 
@@ -146,8 +146,7 @@ struct GroupOutput {
 };
 
 /// The seed's split: indices of points whose residual exceeds the mean |u| or mean |v| residual of all of
-/// them and is at least `min_flow_px` long (of a point with `across`, the residual's component across its
-/// edge must; the means are of the whole residuals). With GroupMembers::Labels: the points labelled dynamic that have
+/// them and is at least `min_flow_px` long. With GroupMembers::Labels: the points labelled dynamic that have
 /// a residual. Auto is the pipeline's to resolve per frame (motion_stages); here it splits as Flow.
 std::vector<uint32_t> strong_motion(const std::vector<MotionPoint> &points, const GroupParams &params);
 

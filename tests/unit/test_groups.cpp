@@ -424,24 +424,44 @@ TEST(Groups, LabelMembersAreTheDynamicPointsWithAResidual)
 	EXPECT_EQ(strong_motion(points, params), std::vector<uint32_t>{0});
 }
 
-TEST(Groups, AResidualAlongAnEdgeIsNotStrongMotion)
+TEST(Groups, AGroupThatMovedOnlyAlongItsEdgesIsDropped)
 {
-	// Twenty still points and three with the same 5 px sideways residual: one on a vertical edge (its
-	// across direction is sideways: the residual is measured), one on a horizontal edge (across is up and
-	// down: the sideways residual is along the edge, not measured), one with no edge.
-	std::vector<MotionPoint> points(23);
-	for (auto &p : points)
-		p.residual = {0, 0};
-	for (size_t i = 20; i < 23; ++i)
-		points[i].residual = {5, 0};
-	points[20].across = {1, 0};
-	points[21].across = {0, 1};
-	GroupParams params;
-	params.members = GroupMembers::Flow;
-	EXPECT_EQ(strong_motion(points, params), (std::vector<uint32_t>{20, 22}));
-	// Across at 45 degrees keeps 5 / sqrt(2) = 3.5 px of it: still strong.
-	points[21].across = {0.70710678F, 0.70710678F};
-	EXPECT_EQ(strong_motion(points, params), (std::vector<uint32_t>{20, 21, 22}));
+	// The crossing scene's two groups, both moving sideways. Group A's points are put on horizontal edges
+	// (across is up and down: their sideways motion is along the edge, not measured) in share `on_edge` of
+	// them; B's stay textured. Most of A on edges: A is the aperture problem's and is dropped, B stays. A
+	// minority on edges, or edges across the motion (vertical ones), keep A.
+	const auto groups_after = [](double on_edge, cv::Point2f across) {
+		std::mt19937 rng(5);
+		GroupParams params;
+		AffinityPropagation workspace;
+		GroupMemory memory;
+		GroupMotionContext context;
+		context.dt_s = 0.1;
+		std::vector<TargetGroup> groups;
+		for (int frame = 0; frame < 4; ++frame) {
+			auto points = crossing_frame(frame, rng);
+			for (size_t i = 0; i < 20; ++i)
+				if (static_cast<double>(i) < on_edge * 20)
+					points[120 + i].across = across;
+			GroupOutput out =
+				find_groups(points, frame == 0 ? nullptr : &memory, context, params, workspace);
+			memory = out.memory;
+			groups = out.groups;
+		}
+		return groups;
+	};
+	const auto rightwards = [](const std::vector<TargetGroup> &groups) {
+		return std::count_if(groups.begin(), groups.end(),
+				     [](const TargetGroup &g) { return g.image_velocity_pxps[0] > 0; });
+	};
+	const std::vector<TargetGroup> none_on_edge = groups_after(0, {0, 1});
+	EXPECT_EQ(none_on_edge.size(), 2u);
+	EXPECT_EQ(rightwards(none_on_edge), 1);
+	const std::vector<TargetGroup> most_on_edge = groups_after(0.6, {0, 1});
+	ASSERT_EQ(most_on_edge.size(), 1u) << "A, on edges it slid along, is dropped";
+	EXPECT_LT(most_on_edge[0].image_velocity_pxps[0], 0) << "the one left is B";
+	EXPECT_EQ(groups_after(0.4, {0, 1}).size(), 2u) << "a minority on edges keeps A";
+	EXPECT_EQ(groups_after(1, {1, 0}).size(), 2u) << "edges across the motion measure it";
 }
 
 TEST(Groups, PiecesOfANearMoverAtOneDepthAreOneGroup)
