@@ -21,33 +21,29 @@ std::vector<cv::Point2f> edge_directions(const cv::Mat &image, int cols, int row
 					 int window, double ratio)
 {
 	std::vector<cv::Point2f> across(static_cast<size_t>(cols) * static_cast<size_t>(rows), cv::Point2f(0, 0));
-	cv::Mat gx, gy;
+	// The structure tensor's entries summed over each window: products of the gradients, box-summed (zero
+	// outside the image, so a window at the border sums what lies inside it).
+	cv::Mat gx, gy, xx, xy, yy;
 	cv::Sobel(image, gx, CV_32F, 1, 0, 3);
 	cv::Sobel(image, gy, CV_32F, 0, 1, 3);
-	const int half = window / 2;
+	const cv::Size box(window, window);
+	cv::boxFilter(gx.mul(gx), xx, -1, box, {-1, -1}, false, cv::BORDER_CONSTANT);
+	cv::boxFilter(gx.mul(gy), xy, -1, box, {-1, -1}, false, cv::BORDER_CONSTANT);
+	cv::boxFilter(gy.mul(gy), yy, -1, box, {-1, -1}, false, cv::BORDER_CONSTANT);
 	const double step_x = static_cast<double>(image.cols) / cols, step_y = static_cast<double>(image.rows) / rows;
 	for (int r = 0; r < rows; ++r)
 		for (int c = 0; c < cols; ++c) {
-			const int x0 = static_cast<int>((c + 0.5) * step_x), y0 = static_cast<int>((r + 0.5) * step_y);
-			double xx = 0, xy = 0, yy = 0;
-			for (int y = std::max(y0 - half, 0); y <= std::min(y0 + half, image.rows - 1); ++y) {
-				const auto *dx = gx.ptr<float>(y);
-				const auto *dy = gy.ptr<float>(y);
-				for (int x = std::max(x0 - half, 0); x <= std::min(x0 + half, image.cols - 1); ++x) {
-					xx += dx[x] * dx[x];
-					xy += dx[x] * dy[x];
-					yy += dy[x] * dy[x];
-				}
-			}
-			// Eigenvalues of [[xx, xy], [xy, yy]]; the larger one's eigenvector is the way across the
+			const int x = static_cast<int>((c + 0.5) * step_x), y = static_cast<int>((r + 0.5) * step_y);
+			const double sxx = xx.at<float>(y, x), sxy = xy.at<float>(y, x), syy = yy.at<float>(y, x);
+			// Eigenvalues of [[sxx, sxy], [sxy, syy]]; the larger one's eigenvector is the way across the
 			// edges.
-			const double mean = 0.5 * (xx + yy), spread = std::hypot(0.5 * (xx - yy), xy);
+			const double mean = 0.5 * (sxx + syy), spread = std::hypot(0.5 * (sxx - syy), sxy);
 			const double large = mean + spread, small = mean - spread;
 			if (!(large > 0) || small >= ratio * large)
 				continue;
 			// In full-resolution pixels the direction is the same when both axes scale alike (they do: the
 			// flow image is the left image resized by one factor); scaled per axis to stay exact otherwise.
-			const double angle = 0.5 * std::atan2(2 * xy, xx - yy);
+			const double angle = 0.5 * std::atan2(2 * sxy, sxx - syy);
 			cv::Point2d dir(std::cos(angle) / to_full_x, std::sin(angle) / to_full_y);
 			dir /= std::hypot(dir.x, dir.y);
 			across[static_cast<size_t>(r * cols + c)] = cv::Point2f(dir);
