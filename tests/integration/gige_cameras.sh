@@ -89,7 +89,10 @@ stream_pair() { # name
 	frames_of "$WORK/$1.out" >"$WORK/$1.frames"
 	N=$(wc -l <"$WORK/$1.frames")
 	STATUS=$(last_status "$WORK/$1.out")
-	[ "$N" -ge 480 ] || fail "$1: only $N frames in 20 s at 30 fps; $STATUS"
+	[ "$N" -gt 0 ] || fail "$1: no frame in 20 s; $STATUS"
+	# Each camera delivered its 20 s at 30 fps to the driver, whatever became of the pairs.
+	[ "$(echo "$STATUS" | jq '[.device.left_completed, .device.right_completed] | min >= 480')" = true ] ||
+		fail "$1: a camera completed fewer than 480 frames in 20 s at 30 fps: $STATUS"
 	jq -s -e '[.[].seq] as $s | all(range(1; $s|length); $s[.] == $s[. - 1] + 1)' "$WORK/$1.frames" >/dev/null ||
 		fail "$1: frame sequence has a gap or is out of order"
 	SKEW=$(jq -s '[.[].lr_skew_ns | fabs] | max' "$WORK/$1.frames")
@@ -108,6 +111,7 @@ stream_pair() { # name
 
 # A camera that stamps its exposures: nothing may be lost at all, not even a frame without its partner.
 stream_pair exposure
+[ "$N" -ge 480 ] || fail "exposure: only $N frames in 20 s at 30 fps; $STATUS"
 [ "$SKEW" -lt 2000000 ] || fail "exposure-stamped cameras: |lr_skew| up to $SKEW ns (limit: under 2 ms)"
 missing=$(echo "$STATUS" | jq '.device.left_missing_frames + .device.right_missing_frames')
 [ "$UNPAIRED" = 0 ] && [ "$missing" = 0 ] ||
@@ -119,7 +123,9 @@ wait "${EXPOSURE_PIDS[@]}" 2>/dev/null || true
 # Aravis's stock fake stamps the moment its sender thread runs. That thread stalls now and then on a busy
 # 2-core machine (testbeds FINDINGS 1.3) and skips frame periods without a frame-id gap: the partner's frames
 # of those periods cannot be paired. Those are counted as unpaired and must be explained, two for one at most,
-# by the periods a camera skipped or the late frames it sent. Any other drop is a failure.
+# by the periods a camera skipped or the late frames it sent. Any other drop is a failure. How many pairs are
+# left depends on how busy the machine is (on CI's two cores beside the daemon, 266 of 596 once), so the
+# pairs are not counted against a floor here; every frame the cameras completed must be accounted for.
 start_camera 127.0.0.1 CAM-L
 start_camera 127.0.0.2 CAM-R
 RIGHT_PID=$CAM_PID
@@ -129,7 +135,13 @@ skipped=$(echo "$STATUS" | jq '.device | .left_skipped_periods + .right_skipped_
 # (a fault costs at most two frames, its own and its partner's: a skipped period costs the partner's frame, a
 # late frame itself and the partner it missed; the +3 covers the cameras settling just after the first pair)
 [ "$UNPAIRED" -le $((2 * skipped + 3)) ] || fail "stock: $UNPAIRED unpaired frames, but the cameras skipped or were irregular only $skipped: $STATUS"
-pass "pair, Aravis's stock fake: $N frames, $UNPAIRED unpaired for $skipped skipped periods and late frames of the fake cameras, |lr_skew| max $SKEW ns, latency $LATENCY ms"
+# Every completed frame is in a pair, counted unpaired (at start-up or later) or discarded while settling; at
+# most a frame per camera may still be waiting for its partner when the last status was written.
+unaccounted=$(echo "$STATUS" | jq '(.device | .left_completed + .right_completed - .startup_unpaired - .settling_discarded)
+	- .drops.unpaired - 2 * .frames.captured')
+[ "$unaccounted" -ge 0 ] && [ "$unaccounted" -le 2 ] ||
+	fail "stock: $unaccounted completed frames neither paired nor counted: $STATUS"
+pass "pair, Aravis's stock fake: $N frames, every completed frame paired or counted, $UNPAIRED unpaired for $skipped skipped periods and late frames of the fake cameras, |lr_skew| max $SKEW ns, latency $LATENCY ms"
 
 # ---------------------------------------------------------------------------------- 2. packet loss
 start_camera 127.0.0.3 CAM-LOSSY -r 10
