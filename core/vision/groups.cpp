@@ -475,7 +475,7 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 			const ClusterRound second =
 				cluster_round(unplaced, points, context, params, again, workspace, kept, nullptr);
 			out.ap_iterations += second.iterations;
-			out.clustering_ms += second.clustering_ms;
+			*out.clustering_ms += second.clustering_ms;
 		}
 		// The fill rule on each piece before the merge: pieces of one mover joined across the gaps between
 		// them fill their common box less than each its own.

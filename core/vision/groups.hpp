@@ -142,7 +142,9 @@ struct GroupOutput {
 	std::vector<cv::Point2f> residuals; ///< per published group: its members' median residual
 	int clusters = 0;		    ///< AP clusters this frame, first round (before the size and age rules)
 	int ap_iterations = 0;
-	double clustering_ms = 0; ///< Affinity Propagation's time alone, both rounds (the issue's cap is on it)
+	/// Affinity Propagation's time alone, both rounds (the cap is on it); unset when no point moved
+	/// strongly enough to be clustered.
+	std::optional<double> clustering_ms;
 };
 
 /// The seed's split: indices of points whose residual exceeds the mean |u| or mean |v| residual of all of

@@ -611,7 +611,8 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 			found = find_groups(motion, memory, context, group_params, workspace);
 		}
 		// Inside "groups", reported on its own: the clustering's cost is what groups.max_points bounds.
-		result.timing.push_back({"clustering", found.clustering_ms});
+		if (found.clustering_ms)
+			result.timing.push_back({"clustering", *found.clustering_ms});
 		group_of_point = std::move(found.group_of_point);
 		tracks.groups = std::move(found.memory);
 		result.groups = std::move(found.groups);

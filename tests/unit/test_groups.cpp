@@ -192,6 +192,7 @@ TEST(Groups, IdsSurviveTwoGroupsCrossing)
 		const auto points = crossing_frame(frame, rng);
 		GroupOutput out = find_groups(points, frame == 0 ? nullptr : &memory, context, params, workspace);
 		memory = out.memory;
+		EXPECT_TRUE(out.clustering_ms.has_value()) << "clustered, so timed; frame " << frame;
 		if (frame == 0) {
 			EXPECT_TRUE(out.groups.empty()) << "published before min_age_frames";
 			continue;
@@ -405,6 +406,8 @@ TEST(Groups, StillSceneHasNoGroup)
 		// sigma 0.3 px: one point in ~250 is 1 px off by chance; alone it makes no group
 		EXPECT_LE(out.strong.size(), 4u) << "noise under min_flow_px is not strong motion";
 	}
+	// Nothing to cluster: no clustering time is reported (rather than a 0 that reads as a fast clustering).
+	EXPECT_FALSE(find_groups({}, nullptr, {0.1, {}, {}, {}}, {}, workspace).clustering_ms.has_value());
 }
 
 TEST(Groups, LabelMembersAreTheDynamicPointsWithAResidual)
