@@ -107,6 +107,7 @@ PipelineOptions pipeline_options(const DaemonConfig &config, const drivers::Sour
 	options.ring_capacity = static_cast<size_t>(config.pipeline.ring_capacity);
 	options.overflow = policy_for(config.pipeline.overflow, live);
 	options.worker_nice = config.pipeline.worker_nice;
+	options.warm_up = config.pipeline.warm_up && live; // a file's frames do not wait on the workers
 	options.motion = config.motion;
 	options.motion.rig = info.calibration;
 	if (!config.calibration.file.empty()) {

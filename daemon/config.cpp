@@ -365,6 +365,10 @@ const std::vector<Option> &options()
 		o.push_back(number(
 			"pipeline", "worker_nice", "processing threads run this much nicer than capture (0 = same)",
 			[](DaemonConfig &c) -> int & { return c.pipeline.worker_nice; }, 0, 19));
+		o.push_back(boolean(
+			"pipeline", "warm_up",
+			"workers run the stages on two made-up frames before capture starts (first frames on time)",
+			[](DaemonConfig &c) -> bool & { return c.pipeline.warm_up; }));
 		o.push_back(text("pipeline", "overflow", "when processing falls behind: auto | drop-oldest | block",
 				 [](DaemonConfig &c) -> std::string & { return c.pipeline.overflow; },
 				 {"auto", "drop-oldest", "block"}));

@@ -16,6 +16,7 @@ struct PipelineConfig {
 	int ring_capacity = 8;	       ///< frames between capture and processing
 	std::string overflow = "auto"; ///< auto | drop-oldest | block ("auto": drop-oldest for live sources)
 	int worker_nice = 0;	       ///< processing threads run this much nicer than capture
+	bool warm_up = true;	       ///< workers run the stages on made-up frames before capture starts
 };
 
 struct OutputConfig {

@@ -15,6 +15,7 @@
 #include <deque>
 #include <functional>
 #include <future>
+#include <latch>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -40,6 +41,9 @@ struct PipelineOptions {
 	OverflowPolicy overflow = OverflowPolicy::DropOldest;
 	int worker_nice = 0;			///< workers run this much nicer than capture (0 = same priority)
 	int64_t drain_limit_ns = 1'000'000'000; ///< live sources: how long a stop may spend on the backlog
+	/// Each worker runs the vision stages on two made-up frames before capture starts, so the first camera
+	/// frames do not pay for the workers' first allocations (docs/geometry.md, Cost).
+	bool warm_up = true;
 	vision::MotionParams motion;
 	/// From a calibration file: both eyes are rectified before any vision stage (motion.rig is then its rig).
 	std::shared_ptr<const geometry::Rectification> rectification;
@@ -75,6 +79,7 @@ public:
 	Pipeline &operator=(const Pipeline &) = delete;
 
 	void set_frame_observer(FrameObserver observer) { observer_ = std::move(observer); }
+	/// Starts the threads; returns once the workers are warm (PipelineOptions::warm_up) and capture runs.
 	void start();
 	/// Stops capture; frames already captured are still processed and published (drain).
 	void request_stop();
@@ -103,6 +108,7 @@ private:
 	void capture_loop();
 	void dispatch_loop();
 	void worker_loop();
+	void warm_up();
 	void publish_loop();
 	void process(Job &job);
 	void set_state(const char *state);
@@ -141,6 +147,8 @@ private:
 	std::string state_ = "starting";
 	LatencyWindow latency_{2048};
 	vision::CalibrationHealth calibration_health_; ///< under state_mutex_
+
+	std::latch workers_warm_; ///< counted down by each worker once warm; capture waits for it
 
 	std::thread capture_thread_, dispatch_thread_, publish_thread_;
 	std::vector<std::thread> workers_;

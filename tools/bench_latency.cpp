@@ -100,7 +100,8 @@ private:
 struct Run {
 	protocol::LatencySummary latency;
 	double fps = 0;
-	double cpu_ms = 0; ///< process CPU per published frame, every thread (the sim's rendering too when live)
+	double cpu_ms = 0;	 ///< process CPU per published frame, every thread (the sim's rendering too when live)
+	double first_max_ms = 0; ///< the largest latency of the first 10 frames published
 	daemon::PipelineStats stats;
 	std::map<std::string, double> stage_ms; ///< mean per published frame
 	std::optional<daemon::DdsPublisher::Stats> dds;
@@ -165,6 +166,7 @@ struct Setup {
 	drivers::SourceConfig config;
 	std::shared_ptr<const RenderedFrames> rendered;
 	size_t ring_capacity = daemon::PipelineOptions{}.ring_capacity;
+	bool warm_up = daemon::PipelineOptions{}.warm_up;
 };
 
 Run run(const Setup &setup, Path path, double seconds, size_t workers, Publish publish = Publish::None,
@@ -197,6 +199,7 @@ Run run(const Setup &setup, Path path, double seconds, size_t workers, Publish p
 	options.motion.dense.method = flow; // the groups' members: feature matches, or seed 002's global flow
 	options.motion.stereo = stereo;
 	options.motion.matching = matching;
+	options.warm_up = setup.warm_up;
 	std::mutex m;
 	std::vector<int64_t> latencies;
 	std::map<std::string, double> stages;
@@ -220,6 +223,8 @@ Run run(const Setup &setup, Path path, double seconds, size_t workers, Publish p
 	Run out;
 	out.stats = pipeline.stats();
 	out.latency = summarize_ns(latencies);
+	for (size_t i = 0; i < std::min<size_t>(10, latencies.size()); ++i)
+		out.first_max_ms = std::max(out.first_max_ms, static_cast<double>(latencies[i]) * 1e-6);
 	out.fps = static_cast<double>(latencies.size()) / seconds;
 	out.cpu_ms = cpu_s * 1e3 / std::max<double>(1, static_cast<double>(latencies.size()));
 	const double n = std::max<double>(1, static_cast<double>(latencies.size()));
@@ -238,10 +243,10 @@ void row(const char *name, const Run &r)
 		const auto it = r.stage_ms.find(key);
 		return it == r.stage_ms.end() ? 0.0 : it->second;
 	};
-	std::printf("| %-28s | %6.1f | %6.1f | %7.2f | %7.2f | %7.2f | %7.2f | %6llu | %6llu | %6.2f | %6.2f | %6.2f | "
-		    "%6.2f | %6.2f | %6.2f | %6.2f |\n",
+	std::printf("| %-28s | %6.1f | %6.1f | %7.2f | %7.2f | %7.2f | %7.2f | %7.2f | %6llu | %6llu | %6.2f | %6.2f | "
+		    "%6.2f | %6.2f | %6.2f | %6.2f | %6.2f |\n",
 		    name, r.fps, r.cpu_ms, r.latency.p50_ms, r.latency.p90_ms, r.latency.p99_ms, r.latency.max_ms,
-		    static_cast<unsigned long long>(r.stats.ring_evicted),
+		    r.first_max_ms, static_cast<unsigned long long>(r.stats.ring_evicted),
 		    static_cast<unsigned long long>(r.stats.pool_exhausted), stage("extract"), stage("stereo"),
 		    stage("match") + stage("subpixel"), stage("classify"), stage("pose"),
 		    stage("flow_image") + stage("flow"), stage("groups"));
@@ -272,6 +277,9 @@ int main(int argc, char **argv)
 		->check(CLI::Range(1, 1024));
 	bool default_only = false;
 	app.add_flag("--default-only", default_only, "only the stereo path as configured by default");
+	bool cold = false;
+	app.add_flag("--cold", cold,
+		     "every run without the workers' warm-up (PipelineOptions::warm_up), to compare its first frames");
 	bool prerendered = false;
 	app.add_flag("--prerendered", prerendered,
 		     "render the sim's frames before the runs and play them at the frame rate (needs about 5 MB of "
@@ -286,8 +294,10 @@ int main(int argc, char **argv)
 	config.config.sim.fps = fps;
 	config.config.sim.scene = scene;
 	config.ring_capacity = ring;
-	std::printf("sim '%s' %dx%d stereo at %.0f fps, %zu workers, ring of %zu, %.0f s per run, drop-oldest\n",
-		    scene.c_str(), width, height, fps, workers, ring, seconds);
+	config.warm_up = !cold;
+	std::printf("sim '%s' %dx%d stereo at %.0f fps, %zu workers, ring of %zu, %.0f s per run, drop-oldest, %s\n",
+		    scene.c_str(), width, height, fps, workers, ring, seconds,
+		    cold ? "workers not warmed up (--cold)" : "workers warmed up before capture");
 	if (prerendered) {
 		config.rendered = prerender(config.config, seconds);
 		std::printf("frames pre-rendered and played at %.0f fps (rendering them took %.1f ms of CPU a frame, "
@@ -296,11 +306,11 @@ int main(int argc, char **argv)
 	} else {
 		std::printf("frames rendered live by the sim on the same cores (--prerendered to leave it out)\n");
 	}
-	std::printf("\n| %-28s | %6s | %6s | %7s | %7s | %7s | %7s | %6s | %6s | %6s | %6s | %6s | %6s | %6s | %6s | "
-		    "%6s |\n",
-		    "pipeline", "fps", "CPU ms", "p50 ms", "p90 ms", "p99 ms", "max ms", "ring", "pool", "extr.",
-		    "stereo", "match", "class.", "pose", "flow", "groups");
-	std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+	std::printf("\n| %-28s | %6s | %6s | %7s | %7s | %7s | %7s | %7s | %6s | %6s | %6s | %6s | %6s | %6s | %6s | "
+		    "%6s | %6s |\n",
+		    "pipeline", "fps", "CPU ms", "p50 ms", "p90 ms", "p99 ms", "max ms", "1st 10", "ring", "pool",
+		    "extr.", "stereo", "match", "class.", "pose", "flow", "groups");
+	std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
 	if (default_only) {
 		row("stereo + pose (default)", run(config, Path::Stereo, seconds, workers));
 		return 0;
@@ -345,7 +355,8 @@ int main(int argc, char **argv)
 		}
 	}
 	std::printf("\nlatency = t_publish - t_host (capture complete on the host -> message handed to the socket);\n"
-		    "ring/pool = frames dropped by drop-oldest / for want of a free frame; stage columns: mean ms per "
+		    "1st 10 = the largest latency of the first 10 frames; ring/pool = frames dropped by drop-oldest / "
+		    "for want of a free frame; stage columns: mean ms per "
 		    "frame (flow: the image scaling and the dense flow).\n");
 	for (const auto &[name, r] : dds_rows)
 		if (r.dds)

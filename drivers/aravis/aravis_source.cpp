@@ -134,10 +134,7 @@ public:
 		open(kLeft);
 		if (paired_)
 			open(kRight);
-		// Every stream exists before any camera sends (AravisCamera::start says why).
-		cams_[kLeft].camera->start();
-		if (paired_)
-			cams_[kRight].camera->start();
+		// The cameras send from the first grab on (start_acquisition).
 		const AravisCamera &left = *cams_[kLeft].camera;
 		recipe_ = recipe_for(config_, left.pixel_format(), left.pixel_format_name());
 		if (paired_) {
@@ -174,6 +171,7 @@ public:
 
 	GrabStatus grab(StereoFrame &into) override
 	{
+		start_acquisition();
 		// Return within ~100 ms either way, so the pipeline sees a stop request promptly.
 		const int64_t deadline = monotonic_ns() + 100'000'000;
 		for (;;) {
@@ -308,6 +306,22 @@ public:
 	}
 
 private:
+	/// The cameras send from the first grab on, not from their opening: while the pipeline gets ready (its
+	/// workers' warm-up) their frames would wait in the stream's buffers and reach the pipeline late. Every
+	/// stream exists before any camera sends (AravisCamera::start says why). A reconnect starts the cameras
+	/// it reopens itself.
+	void start_acquisition()
+	{
+		if (acquisition_started_)
+			return;
+		for (size_t side : {kLeft, kRight})
+			if (side == kLeft || paired_) {
+				cams_[side].camera->start();
+				cams_[side].last_frame_ns = monotonic_ns();
+			}
+		acquisition_started_ = true;
+	}
+
 	void open(size_t side)
 	{
 		CameraState &state = cams_[side];
@@ -496,6 +510,7 @@ private:
 	int64_t outage_start_ns_ = 0;
 	bool paired_once_ = false;
 	std::atomic<uint64_t> unpaired_{0}, startup_unpaired_{0}, outage_frames_{0}, settling_discarded_{0};
+	bool acquisition_started_ = false; ///< the first grab started the cameras
 	std::atomic<int64_t> skew_last_{0}, skew_max_abs_{0};
 };
 

@@ -69,6 +69,7 @@ public:
 
 	GrabStatus grab(StereoFrame &into) override
 	{
+		start_transmission();
 		pollfd pfd{dc1394_capture_get_fileno(camera_.get()), POLLIN, 0};
 		const int ready = ::poll(&pfd, 1, 100);
 		if (ready == 0)
@@ -198,11 +199,25 @@ private:
 				"dc1394: {}: no embedded cycle-time stamps; timestamps are the host's arrival time",
 				description_);
 		check(dc1394_capture_setup(camera_.get(), 8, DC1394_CAPTURE_FLAGS_DEFAULT), "setting up DMA capture");
-		check(dc1394_video_set_transmission(camera_.get(), DC1394_ON), "starting transmission");
+		transmitting_ = false; // from the next grab on (start_transmission)
 		clock_.reset();
 		last_frame_ns_ = monotonic_ns();
 		spdlog::info("dc1394: {}: Format_7 Mode 3, {} pixels interleaved, sensor tiles {}", description_,
 			     coding == DC1394_COLOR_CODING_MONO16 ? "Mono16" : "Raw16", tile_text);
+	}
+
+	/// The camera sends from the first grab after its opening on: its 8 DMA buffers would otherwise fill, and
+	/// frames be lost, while the pipeline gets ready (its workers' warm-up).
+	void start_transmission()
+	{
+		if (transmitting_)
+			return;
+		const dc1394error_t err = dc1394_video_set_transmission(camera_.get(), DC1394_ON);
+		if (err != DC1394_SUCCESS)
+			throw SourceError("dc1394: " + description_ +
+					  ": starting transmission: " + dc1394_error_get_string(err));
+		transmitting_ = true;
+		last_frame_ns_ = monotonic_ns();
 	}
 
 	void close_camera() noexcept
@@ -223,6 +238,7 @@ private:
 	SourceInfo info_;
 	int width_ = 0, height_ = 0;
 	bool embedded_stamp_ = false;
+	bool transmitting_ = false;
 	camera::CycleTimeClock cycle_clock_;
 	camera::DeviceClock clock_;
 	int64_t last_frame_ns_ = 0;

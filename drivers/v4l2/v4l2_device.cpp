@@ -228,12 +228,18 @@ void V4l2Device::configure(const V4l2Config &config)
 		if (xioctl(fd_, VIDIOC_QBUF, &buffer) != 0)
 			throw SourceError(path_ + ": VIDIOC_QBUF: " + errno_text());
 	}
+	spdlog::info("v4l2: {}: {}x{} {} at {:.3g} fps, {} mmap buffers", description_, width_, height_,
+		     fourcc_text(fourcc_), fps_, buffers_.size());
+}
+
+void V4l2Device::start()
+{
+	if (streaming_)
+		return;
 	v4l2_buf_type type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
 	if (xioctl(fd_, VIDIOC_STREAMON, &type) != 0)
 		throw SourceError(path_ + ": VIDIOC_STREAMON: " + errno_text());
 	streaming_ = true;
-	spdlog::info("v4l2: {}: {}x{} {} at {:.3g} fps, {} mmap buffers", description_, width_, height_,
-		     fourcc_text(fourcc_), fps_, buffers_.size());
 }
 
 void V4l2Device::set_controls(const std::vector<std::string> &controls)

@@ -25,12 +25,16 @@ enum class NextResult : uint8_t { Frame, Timeout, Lost };
 class V4l2Device
 {
 public:
-	/// Opens and configures `path`; throws SourceError naming the device, the setting and what the driver
-	/// allows.
+	/// Opens and configures `path` and queues its buffers; throws SourceError naming the device, the setting
+	/// and what the driver allows. It does not stream yet (start()).
 	V4l2Device(const std::string &path, const V4l2Config &config);
 	~V4l2Device();
 	V4l2Device(const V4l2Device &) = delete;
 	V4l2Device &operator=(const V4l2Device &) = delete;
+
+	/// Starts streaming (VIDIOC_STREAMON) unless it already does; throws SourceError.
+	void start();
+	[[nodiscard]] bool streaming() const noexcept { return streaming_; }
 
 	NextResult next(int timeout_ms, V4l2Buffer &buffer);
 	/// Queues the buffer back; false when the device is gone.

@@ -122,6 +122,7 @@ public:
 
 	GrabStatus grab(StereoFrame &into) override
 	{
+		start_streaming();
 		const int64_t deadline = monotonic_ns() + 100'000'000;
 		for (;;) {
 			for (size_t side : {kLeft, kRight})
@@ -166,6 +167,20 @@ public:
 				release(right);
 				unpaired_.fetch_add(1);
 				break;
+			}
+		}
+	}
+
+	/// The devices stream from the first grab on (and a reopened one from the grab after), not from their
+	/// opening: their few buffers would otherwise fill, and frames be lost, while the pipeline gets ready
+	/// (its workers' warm-up).
+	void start_streaming()
+	{
+		for (size_t side : {kLeft, kRight}) {
+			DeviceState &state = devices_[side];
+			if ((side == kLeft || paired_) && state.device && !state.device->streaming()) {
+				state.device->start();
+				state.last_frame_ns = monotonic_ns();
 			}
 		}
 	}

@@ -3,6 +3,7 @@
 #include <mutex>
 #include <thread>
 
+#include "core/protocol.hpp"
 #include "daemon/pipeline.hpp"
 
 using namespace stereod;
@@ -19,6 +20,17 @@ std::unique_ptr<drivers::FrameSource> small_sim(uint64_t frames, bool realtime, 
 	config.sim.frames = frames;
 	config.sim.fps = fps;
 	config.sim.stereo = false;
+	return drivers::SourceRegistry::with_builtin_drivers().create(config);
+}
+
+/// The sim's calibrated stereo rig, offline.
+std::unique_ptr<drivers::FrameSource> stereo_sim(int width, int height, uint64_t frames)
+{
+	drivers::SourceConfig config;
+	config.realtime = false;
+	config.sim.width = width;
+	config.sim.height = height;
+	config.sim.frames = frames;
 	return drivers::SourceRegistry::with_builtin_drivers().create(config);
 }
 
@@ -55,12 +67,7 @@ TEST(Pipeline, StereoPathMatchesTheRightEyesFeaturesOnHealthFramesOnly)
 	// The stereo path through the workers: the right eye's features are extracted beside the left's (on
 	// another thread) on every 5th frame, and only those frames have descriptor candidates. Under TSan this
 	// is the check that the two eyes' extraction shares nothing it should not.
-	drivers::SourceConfig config;
-	config.realtime = false;
-	config.sim.width = 320;
-	config.sim.height = 240;
-	config.sim.frames = 21;
-	auto source = drivers::SourceRegistry::with_builtin_drivers().create(config);
+	auto source = stereo_sim(320, 240, 21);
 	std::vector<FrameResult> results;
 	PipelineOptions options;
 	options.workers = 2;
@@ -84,6 +91,41 @@ TEST(Pipeline, StereoPathMatchesTheRightEyesFeaturesOnHealthFramesOnly)
 			EXPECT_TRUE(results[i].ego->valid) << "frame " << i;
 		}
 	}
+}
+
+TEST(Pipeline, WarmUpLeavesTheResultsAsTheyWere)
+{
+	// The workers' warm-up runs the stages on made-up frames before capture: nothing of it may reach a
+	// result. Stereo sim with depth, the groups and the rescue on: every field but the clocks and the
+	// stage times must be the same with and without it.
+	const auto messages = [](bool warm_up) {
+		auto source = stereo_sim(640, 480, 12);
+		PipelineOptions options;
+		options.workers = 2;
+		options.overflow = OverflowPolicy::Block;
+		options.warm_up = warm_up;
+		options.motion.features.max_features = 500;
+		options.motion.rig = source->info().calibration;
+		std::vector<std::string> out;
+		Pipeline pipeline(std::move(source), options, [&](FrameResult &r) {
+			r.t_host_ns = r.t_publish_ns = 0;
+			r.timing.clear();
+			out.push_back(protocol::frame_message(r));
+		});
+		pipeline.start();
+		pipeline.wait();
+		return out;
+	};
+	const auto warm = messages(true);
+	const auto cold = messages(false);
+	ASSERT_EQ(warm.size(), 12U);
+	ASSERT_EQ(cold.size(), warm.size());
+	size_t with_groups = 0;
+	for (size_t i = 0; i < warm.size(); ++i) {
+		EXPECT_EQ(warm[i], cold[i]) << "frame " << i;
+		with_groups += warm[i].find("\"groups\":[]") == std::string::npos;
+	}
+	EXPECT_GT(with_groups, 0U) << "the comparison should cover frames with groups";
 }
 
 TEST(Pipeline, DropOldestCountsWhatASlowConsumerLoses)
