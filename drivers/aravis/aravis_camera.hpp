@@ -1,6 +1,6 @@
 #pragma once
 // One GigE Vision / USB3 Vision camera and its stream, owned: opening configures it from AravisConfig,
-// pushes every stream buffer once, and starts acquisition; destruction stops and frees everything. The
+// pushes every stream buffer once; start() starts acquisition; destruction stops and frees everything. The
 // buffers are then recycled between the stream and the source forever (no allocation per frame).
 #include <atomic>
 #include <cstdint>

@@ -1,6 +1,6 @@
 #pragma once
-// One Video4Linux2 capture device, owned: opening sets the format, frame rate and controls, maps the
-// driver's buffers and starts streaming; destruction stops and unmaps. Buffers are dequeued and queued back
+// One Video4Linux2 capture device, owned: opening sets the format, frame rate and controls and maps and queues
+// the driver's buffers; start() streams; destruction stops and unmaps. Buffers are dequeued and queued back
 // forever; nothing is allocated per frame.
 #include <cstdint>
 #include <string>
