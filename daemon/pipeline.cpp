@@ -65,11 +65,15 @@ void Pipeline::start()
 {
 	capture_turn_ns_.store(monotonic_ns());
 	publish_thread_ = std::thread([this] { publish_loop(); });
-	for (size_t i = 0; i < options_.workers; ++i)
-		workers_.emplace_back([this] { worker_loop(); });
+	// Made once, read by every worker; they outlive the warm-up, which start() waits for.
 	const int64_t warm_start_ns = monotonic_ns();
+	const bool warm = options_.warm_up && options_.motion.enabled;
+	const std::array<StereoFrame, 2> frames =
+		warm ? warm_up_frames(source_->info().geometry) : std::array<StereoFrame, 2>{};
+	for (size_t i = 0; i < options_.workers; ++i)
+		workers_.emplace_back([this, warm_frames = warm ? &frames : nullptr] { worker_loop(warm_frames); });
 	workers_warm_.wait(); // capture starts with every worker ready
-	if (options_.warm_up && options_.motion.enabled)
+	if (warm)
 		spdlog::info("workers warmed up in {:.0f} ms",
 			     static_cast<double>(monotonic_ns() - warm_start_ns) * 1e-6);
 	dispatch_thread_ = std::thread([this] { dispatch_loop(); });
@@ -245,11 +249,10 @@ void Pipeline::dispatch_loop()
 	results_changed_.notify_all();
 }
 
-void Pipeline::warm_up()
+void Pipeline::warm_up(const std::array<StereoFrame, 2> &frames)
 {
 	// A worker's first frames took up to 80-100 ms against 25 ms later (OpenCV's buffers, the thread's heap,
 	// the code's pages), enough to set a 15 s run's p99; paid here instead, before capture starts.
-	const auto frames = warm_up_frames(source_->info().geometry);
 	std::vector<StageTime> timing;
 	std::array<vision::FrameFeatures, 2> features;
 	for (size_t i = 0; i < frames.size(); ++i) {
@@ -265,16 +268,16 @@ void Pipeline::warm_up()
 	}
 }
 
-void Pipeline::worker_loop()
+void Pipeline::worker_loop(const std::array<StereoFrame, 2> *warm_frames)
 {
 	// Workers yield to the capture, dispatch and socket threads: when processing cannot keep up, frames are
 	// dropped in the ring (counted as ring_overflow), not lost inside a starved camera stream. Lowering one's
 	// own priority needs no privilege.
 	if (options_.worker_nice > 0)
 		::setpriority(PRIO_PROCESS, static_cast<id_t>(::gettid()), options_.worker_nice);
-	if (options_.warm_up && options_.motion.enabled) {
+	if (warm_frames != nullptr) {
 		try {
-			warm_up();
+			warm_up(*warm_frames);
 		} catch (const std::exception &e) {
 			spdlog::warn("warming a worker up: {}", e.what()); // the first frames will be slower, no more
 		}

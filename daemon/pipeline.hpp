@@ -9,6 +9,7 @@
 //               several frames runs in parallel.
 //   workers     run the stages (pure functions) and give the frame back to the pool.
 //   publisher   re-orders results by dispatch order and hands them to the sink one by one.
+#include <array>
 #include <atomic>
 #include <condition_variable>
 #include <cstdint>
@@ -107,8 +108,9 @@ private:
 
 	void capture_loop();
 	void dispatch_loop();
-	void worker_loop();
-	void warm_up();
+	/// `warm_frames`: run the stages on these first (the warm-up), or null.
+	void worker_loop(const std::array<StereoFrame, 2> *warm_frames);
+	void warm_up(const std::array<StereoFrame, 2> &frames);
 	void publish_loop();
 	void process(Job &job);
 	void set_state(const char *state);

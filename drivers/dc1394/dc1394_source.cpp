@@ -158,11 +158,6 @@ private:
 			throw SourceError("dc1394: camera " + guid_text(chosen) + " found but cannot be opened");
 		description_ =
 			std::string(camera_->vendor) + " " + camera_->model + " (guid " + guid_text(chosen) + ")";
-		auto check = [&](dc1394error_t err, const char *what) {
-			if (err != DC1394_SUCCESS)
-				throw SourceError("dc1394: " + description_ + ": " + what + ": " +
-						  dc1394_error_get_string(err));
-		};
 		uint32_t tile = 0;
 		check(dc1394_get_control_register(camera_.get(), kBayerTileMapping, &tile),
 		      "reading BAYER_TILE_MAPPING");
@@ -212,12 +207,17 @@ private:
 	{
 		if (transmitting_)
 			return;
-		const dc1394error_t err = dc1394_video_set_transmission(camera_.get(), DC1394_ON);
-		if (err != DC1394_SUCCESS)
-			throw SourceError("dc1394: " + description_ +
-					  ": starting transmission: " + dc1394_error_get_string(err));
+		check(dc1394_video_set_transmission(camera_.get(), DC1394_ON), "starting transmission");
 		transmitting_ = true;
 		last_frame_ns_ = monotonic_ns();
+	}
+
+	/// Throws naming the camera and the step when libdc1394 refuses it.
+	void check(dc1394error_t err, const char *what) const
+	{
+		if (err != DC1394_SUCCESS)
+			throw SourceError("dc1394: " + description_ + ": " + what + ": " +
+					  dc1394_error_get_string(err));
 	}
 
 	void close_camera() noexcept
