@@ -249,7 +249,7 @@ void Pipeline::dispatch_loop()
 	results_changed_.notify_all();
 }
 
-void Pipeline::warm_up(const std::array<StereoFrame, 2> &frames)
+void Pipeline::warm_up(const std::array<StereoFrame, 2> &frames, vision::StageWorkspace &workspace)
 {
 	// A worker's first frames took up to 80-100 ms against 25 ms later (OpenCV's buffers, the thread's heap,
 	// the code's pages), enough to set a 15 s run's p99; paid here instead, before capture starts.
@@ -262,8 +262,8 @@ void Pipeline::warm_up(const std::array<StereoFrame, 2> &frames)
 		features[i] = vision::extract_stage(input, options_.motion, timing);
 		if (i > 0) {
 			FrameResult result;
-			(void)vision::pair_stage(&features[i - 1], nullptr, features[i], input, options_.motion,
-						 result);
+			(void)vision::pair_stage(&features[i - 1], nullptr, features[i], input, options_.motion, result,
+						 workspace);
 		}
 	}
 }
@@ -275,9 +275,10 @@ void Pipeline::worker_loop(const std::array<StereoFrame, 2> *warm_frames)
 	// own priority needs no privilege.
 	if (options_.worker_nice > 0)
 		::setpriority(PRIO_PROCESS, static_cast<id_t>(::gettid()), options_.worker_nice);
+	vision::StageWorkspace workspace; // this worker's own, warmed up with it
 	if (warm_frames != nullptr) {
 		try {
-			warm_up(*warm_frames);
+			warm_up(*warm_frames, workspace);
 		} catch (const std::exception &e) {
 			spdlog::warn("warming a worker up: {}", e.what()); // the first frames will be slower, no more
 		}
@@ -294,11 +295,11 @@ void Pipeline::worker_loop(const std::array<StereoFrame, 2> *warm_frames)
 			jobs_.pop_front();
 		}
 		jobs_changed_.notify_all();
-		process(*job);
+		process(*job, workspace);
 	}
 }
 
-void Pipeline::process(Job &job)
+void Pipeline::process(Job &job, vision::StageWorkspace &workspace)
 {
 	const StereoFrame &frame = *job.frame;
 	FrameResult result;
@@ -332,8 +333,9 @@ void Pipeline::process(Job &job)
 			const FeaturesPtr previous = job.previous.valid() ? job.previous.get() : nullptr;
 			const TracksPtr previous_tracks =
 				job.previous_tracks.valid() ? job.previous_tracks.get() : nullptr;
-			auto tracks = std::make_shared<const vision::TrackSet>(vision::pair_stage(
-				previous.get(), previous_tracks.get(), *features, input, options_.motion, result));
+			auto tracks = std::make_shared<const vision::TrackSet>(
+				vision::pair_stage(previous.get(), previous_tracks.get(), *features, input,
+						   options_.motion, result, workspace));
 			job.tracks.set_value(std::move(tracks));
 			tracks_promised = true;
 		}

@@ -110,9 +110,9 @@ private:
 	void dispatch_loop();
 	/// `warm_frames`: run the stages on these first (the warm-up), or null.
 	void worker_loop(const std::array<StereoFrame, 2> *warm_frames);
-	void warm_up(const std::array<StereoFrame, 2> &frames);
+	void warm_up(const std::array<StereoFrame, 2> &frames, vision::StageWorkspace &workspace);
 	void publish_loop();
-	void process(Job &job);
+	void process(Job &job, vision::StageWorkspace &workspace);
 	void set_state(const char *state);
 
 	std::unique_ptr<drivers::FrameSource> source_;

@@ -271,7 +271,8 @@ FrameFeatures extract_stage(const StereoFrame &frame, const MotionParams &params
 }
 
 TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, const FrameFeatures &cur,
-		    const StereoFrame &frame, const MotionParams &params, FrameResult &result)
+		    const StereoFrame &frame, const MotionParams &params, FrameResult &result,
+		    StageWorkspace &workspace)
 {
 	result.stereo = cur.stereo;
 	const bool metric = params.rig.has_value() && params.ego.enabled && !cur.xyz.empty();
@@ -534,8 +535,7 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 	if (params.groups.enabled && params.dense.method != GroupFlow::Sparse && !prev->flow_image.empty() &&
 	    !cur.flow_image.empty()) {
 		StageTimer flow_timer(result.timing, "flow");
-		thread_local cv::Ptr<cv::DISOpticalFlow> dis; // kept per worker: made once
-		cells = dense_flow(prev->flow_image, cur.flow_image, frame.left.size(), params.dense, dis);
+		cells = dense_flow(prev->flow_image, cur.flow_image, frame.left.size(), params.dense, workspace.dis);
 	}
 	if (params.groups.enabled) {
 		StageTimer groups_timer(result.timing, "groups");
@@ -576,8 +576,6 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 			context.world_from_curr = world_from_curr;
 		}
 		context.rig = params.rig;
-		// Affinity Propagation's buffers, kept per worker thread so that clustering does not allocate.
-		thread_local AffinityPropagation workspace;
 		GroupParams group_params = params.groups;
 		if (group_params.members == GroupMembers::Auto)
 			group_params.members = moved ? GroupMembers::Labels : GroupMembers::Flow;
@@ -600,7 +598,7 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 			const std::vector<uint32_t> strong =
 				supported_cells(strong_motion(cell_points, group_params), cells->cols, cells->rows,
 						params.dense.min_strong_neighbours);
-			found = find_groups(cell_points, memory, context, group_params, workspace, &strong);
+			found = find_groups(cell_points, memory, context, group_params, workspace.affinity, &strong);
 			const std::vector<int> group_of_cell = std::move(found.group_of_point);
 			found.group_of_point.assign(n, -1);
 			join_groups(motion, found, group_params, found.group_of_point);
@@ -608,7 +606,7 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 				join_by_cells(motion, group_of_cell, cells->cols, cells->rows, params.dense.step_px,
 					      0.5 * group_params.min_flow_px, found.group_of_point);
 		} else {
-			found = find_groups(motion, memory, context, group_params, workspace);
+			found = find_groups(motion, memory, context, group_params, workspace.affinity);
 		}
 		// Inside "groups", reported on its own: the clustering's cost is what groups.max_points bounds.
 		if (found.clustering_ms)

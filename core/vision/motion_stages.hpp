@@ -50,12 +50,21 @@ struct MotionParams {
 /// appends "extract" (and "stereo": the right eye's features and the matching).
 FrameFeatures extract_stage(const StereoFrame &frame, const MotionParams &params, std::vector<StageTime> &timing);
 
+/// What a worker keeps from one frame's pair stage to the next so that the stages do not make it again:
+/// Affinity Propagation's buffers and the DIS flow object. One per worker thread, owned by it and never
+/// shared; a new one only costs the first frame some allocations.
+struct StageWorkspace {
+	AffinityPropagation affinity;
+	cv::Ptr<cv::DISOpticalFlow> dis; ///< made at the first frame with `groups.flow = "dis"`
+};
+
 /// Matches n-1 to n, classifies and applies the motion memory; fills result.points and result.ego,
 /// appends "match", "classify" (and "pose"), and returns frame n's memory for the next call. With no previous
 /// frame (the first one, or after a gap the caller chose not to bridge) points stay empty and the memory
 /// starts afresh; `prev_tracks` null with `prev` set means the previous memory was lost, and it starts afresh
 /// too. A stereo frame's ego then has the identity pose as the world's origin.
 TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, const FrameFeatures &cur,
-		    const StereoFrame &frame, const MotionParams &params, FrameResult &result);
+		    const StereoFrame &frame, const MotionParams &params, FrameResult &result,
+		    StageWorkspace &workspace);
 
 } // namespace stereod::vision

@@ -106,8 +106,9 @@ TEST(PersonPrior, PointsInAPersonBoxLeaveTheMotionFit)
 			b.people = std::vector<PriorRegion>{region(46, 14, 232, 212)};
 		}
 		FrameResult first, second;
-		const TrackSet t0 = pair_stage(nullptr, nullptr, a, f0, params, first);
-		pair_stage(&a, &t0, b, f1, params, second);
+		StageWorkspace workspace;
+		const TrackSet t0 = pair_stage(nullptr, nullptr, a, f0, params, first, workspace);
+		pair_stage(&a, &t0, b, f1, params, second, workspace);
 		int outside = 0, outside_static = 0, inside = 0, inside_dynamic = 0;
 		for (const auto &p : second.points) {
 			const bool in = person_box.contains({p.prev_u, p.prev_v}) && p.prev_u > 48 && p.prev_u < 258;

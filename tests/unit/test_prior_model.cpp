@@ -264,8 +264,9 @@ TEST(PriorModel, TheSegmenterDrivesThePriorThroughTheStages)
 	const FrameFeatures b = extract_stage(f1, params, timing);
 	ASSERT_TRUE(b.people.has_value());
 	stereod::FrameResult first, second;
-	const TrackSet t0 = pair_stage(nullptr, nullptr, a, f0, params, first);
-	pair_stage(&a, &t0, b, f1, params, second);
+	StageWorkspace workspace;
+	const TrackSet t0 = pair_stage(nullptr, nullptr, a, f0, params, first, workspace);
+	pair_stage(&a, &t0, b, f1, params, second, workspace);
 	ASSERT_EQ(second.people.size(), 1U);
 	EXPECT_EQ(second.people[0].class_id, 1);
 	EXPECT_NEAR(second.people[0].box_px[0], 46, 3);
