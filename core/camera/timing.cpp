@@ -105,6 +105,18 @@ int64_t DeviceClock::to_host(int64_t device_ns) const noexcept
 	       static_cast<int64_t>(std::llround(offset_ + rate_ * static_cast<double>(device_ns - origin_device_)));
 }
 
+void OutageCounter::delivered(int64_t t_ns) noexcept
+{
+	if (open_ && fps_ > 0 && t_ns > last_ns_) {
+		const auto periods = std::llround(static_cast<double>(t_ns - last_ns_) * 1e-9 * fps_);
+		if (periods > 1)
+			lost_.fetch_add(static_cast<uint64_t>(periods - 1), std::memory_order_relaxed);
+	}
+	open_ = false;
+	have_last_ = true;
+	last_ns_ = t_ns;
+}
+
 uint64_t FrameIdCounter::add(uint64_t id) noexcept
 {
 	uint64_t gap = 0;

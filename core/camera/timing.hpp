@@ -2,6 +2,7 @@
 // Camera timing, pure: a device clock mapped onto CLOCK_MONOTONIC, frame counters that wrap, and the pairing
 // rule for two cameras. No I/O, no allocation after construction.
 #include <array>
+#include <atomic>
 #include <cstddef>
 #include <cstdint>
 
@@ -97,6 +98,31 @@ private:
 	uint64_t last_ = 0;
 	uint64_t unwrapped_ = 0;
 	uint64_t missing_ = 0;
+};
+
+/// The frames a camera's outage cost: the periods of its nominal rate between the last frame delivered
+/// before the camera was lost and the first one delivered after it came back, less one. Measured from
+/// those two frames, not from when the loss was noticed (a silence timeout can come seconds later) nor from
+/// when the reopening began or ended (the camera's start-up after it is lost time too). The camera's own
+/// counters restart with it, so they cannot say. Written by the capture thread, read by any.
+class OutageCounter
+{
+public:
+	explicit OutageCounter(double nominal_fps = 0) noexcept : fps_(nominal_fps) {}
+	void set_rate(double nominal_fps) noexcept { fps_ = nominal_fps; }
+	/// A frame delivered, stamped `t_ns` (one clock for every frame); it ends an outage reconnected() began.
+	void delivered(int64_t t_ns) noexcept;
+	/// The camera was reopened: the next frame delivered ends the outage. Before any frame there is nothing
+	/// to measure from, and nothing is counted.
+	void reconnected() noexcept { open_ = have_last_; }
+	/// Frames lost to outages so far.
+	[[nodiscard]] uint64_t lost() const noexcept { return lost_.load(std::memory_order_relaxed); }
+
+private:
+	double fps_;
+	int64_t last_ns_ = 0;
+	bool have_last_ = false, open_ = false;
+	std::atomic<uint64_t> lost_{0};
 };
 
 /// IEEE 1394 cycle time as FireWire cameras stamp their frames (Point Grey's embedded timestamp): 7 bits of

@@ -156,6 +156,7 @@ public:
 					    : left.description() + " (" + config_.layout + ")";
 		info_.geometry = {eye.width, eye.height, recipe_.output, true, false, false, config_.frame_rate};
 		info_.live = true;
+		outage_.set_rate(config_.frame_rate);
 		trigger_period_ns_ = config_.trigger == "software" && config_.frame_rate > 0
 					     ? static_cast<int64_t>(1e9 / config_.frame_rate)
 					     : 0;
@@ -212,8 +213,6 @@ public:
 
 	bool reconnect() override
 	{
-		if (outage_start_ns_ == 0)
-			outage_start_ns_ = monotonic_ns();
 		bool partner_streaming = false;
 		std::array<bool, 2> to_start{};
 		for (size_t side : {kLeft, kRight}) {
@@ -259,11 +258,9 @@ public:
 			}
 			cams_[side].settling = partner_streaming ? kSettlingFrames : 0;
 		}
-		// The frames the outage cost: its length at the nominal rate (the cameras' own counters restarted).
-		const double outage_s = static_cast<double>(monotonic_ns() - outage_start_ns_) * 1e-9;
-		if (config_.frame_rate > 0)
-			outage_frames_.fetch_add(static_cast<uint64_t>(std::llround(outage_s * config_.frame_rate)));
-		outage_start_ns_ = 0;
+		// The frames the outage cost are counted at the first frame after it (OutageCounter): the cameras' own
+		// counters restarted.
+		outage_.reconnected();
 		paired_once_ = false;
 		const int64_t now = monotonic_ns();
 		for (auto &state : cams_)
@@ -297,7 +294,7 @@ public:
 		// Frames lost on the wire by the right camera show up as unpaired left frames; the left camera's
 		// own losses are the pipeline's source_gap (the frame sequence follows its ids).
 		out.drops["unpaired"] = unpaired_.load();
-		out.drops["outage"] = outage_frames_.load();
+		out.drops["outage"] = outage_.lost();
 		out.device["startup_unpaired"] = static_cast<int64_t>(startup_unpaired_.load());
 		out.device["settling_discarded"] = static_cast<int64_t>(settling_discarded_.load());
 		out.device["skew_last_ns"] = skew_last_.load();
@@ -385,7 +382,7 @@ private:
 
 	/// Until the first pair after opening (or reconnecting), the cameras are still starting one after the
 	/// other: frames of the first one have no partner yet. Those are counted apart, not as stream losses
-	/// (an outage's own cost is counted by reconnect()).
+	/// (an outage's own cost is counted at the first pair after it, OutageCounter).
 	void count_unpaired() { (paired_once_ ? unpaired_ : startup_unpaired_).fetch_add(1); }
 
 	/// Right minus left exposure time of the two pending frames. Cameras on one clock (PTP, or `clock =
@@ -482,6 +479,8 @@ private:
 		into.sequence = sequence_;
 		into.device_ns = left.pending_host;
 		into.host_ns = right ? std::max(l.arrival_ns, right->pending.arrival_ns) : l.arrival_ns;
+		// On arrival times: the exposure stamps go through a clock fit that restarts with a reopened camera.
+		outage_.delivered(into.host_ns);
 		into.lr_skew_ns = right ? skew(left, *right) : 0;
 		paired_once_ = true;
 		if (right) {
@@ -507,9 +506,9 @@ private:
 	std::array<CameraState, 2> cams_;
 	uint64_t sequence_ = 0;
 	uint64_t left_missing_seen_ = 0;
-	int64_t outage_start_ns_ = 0;
+	camera::OutageCounter outage_;
 	bool paired_once_ = false;
-	std::atomic<uint64_t> unpaired_{0}, startup_unpaired_{0}, outage_frames_{0}, settling_discarded_{0};
+	std::atomic<uint64_t> unpaired_{0}, startup_unpaired_{0}, settling_discarded_{0};
 	bool acquisition_started_ = false; ///< the first grab started the cameras
 	std::atomic<int64_t> skew_last_{0}, skew_max_abs_{0};
 };

@@ -110,6 +110,7 @@ public:
 					    : left.description() + " (" + config_.layout + ")";
 		info_.geometry = {eye.width, eye.height, output_, true, false, false, left.fps()};
 		info_.live = true;
+		outage_.set_rate(left.fps());
 	}
 
 	~V4l2Source() override
@@ -187,8 +188,6 @@ public:
 
 	bool reconnect() override
 	{
-		if (outage_start_ns_ == 0)
-			outage_start_ns_ = monotonic_ns();
 		for (auto &state : devices_)
 			release(state);
 		// Both devices are reopened: after an unplug the other device's queue is stale anyway.
@@ -217,11 +216,7 @@ public:
 			devices_[side].sequence.reset();
 			devices_[side].last_frame_ns = monotonic_ns();
 		}
-		const double outage_s = static_cast<double>(monotonic_ns() - outage_start_ns_) * 1e-9;
-		if (info_.geometry.nominal_fps > 0)
-			outage_frames_.fetch_add(
-				static_cast<uint64_t>(std::llround(outage_s * info_.geometry.nominal_fps)));
-		outage_start_ns_ = 0;
+		outage_.reconnected(); // counted at the first frame after it (OutageCounter)
 		return true;
 	}
 
@@ -229,7 +224,7 @@ public:
 	{
 		SourceCounters out;
 		out.drops["unpaired"] = unpaired_.load();
-		out.drops["outage"] = outage_frames_.load();
+		out.drops["outage"] = outage_.lost();
 		out.drops["decode_failed"] = decode_failed_.load();
 		for (size_t side : {kLeft, kRight}) {
 			if (side == kRight && !paired_)
@@ -363,6 +358,7 @@ private:
 		into.sequence = sequence_;
 		into.device_ns = left.pending.timestamp_ns;
 		into.host_ns = monotonic_ns();
+		outage_.delivered(into.device_ns);
 		into.lr_skew_ns = right ? right->pending.timestamp_ns - left.pending.timestamp_ns : 0;
 		skew_last_.store(into.lr_skew_ns);
 		if (right)
@@ -383,8 +379,8 @@ private:
 	SourceInfo info_;
 	std::array<DeviceState, 2> devices_;
 	uint64_t sequence_ = 0, left_missing_seen_ = 0;
-	int64_t outage_start_ns_ = 0;
-	std::atomic<uint64_t> unpaired_{0}, outage_frames_{0}, decode_failed_{0};
+	camera::OutageCounter outage_;
+	std::atomic<uint64_t> unpaired_{0}, decode_failed_{0};
 	std::atomic<int64_t> skew_last_{0};
 };
 

@@ -121,20 +121,20 @@ kill "${EXPOSURE_PIDS[@]}" 2>/dev/null || true
 wait "${EXPOSURE_PIDS[@]}" 2>/dev/null || true
 
 # Aravis's stock fake stamps the moment its sender thread runs. That thread stalls now and then on a busy
-# 2-core machine (testbeds FINDINGS 1.3) and skips frame periods without a frame-id gap: the partner's frames
-# of those periods cannot be paired. Those are counted as unpaired and must be explained, two for one at most,
-# by the periods a camera skipped or the late frames it sent. Any other drop is a failure. How many pairs are
-# left depends on how busy the machine is (on CI's two cores beside the daemon, 266 of 596 once), so the
-# pairs are not counted against a floor here; every frame the cameras completed must be accounted for.
+# 2-core machine (testbeds FINDINGS 1.3) and skips frame periods without a frame-id gap, and its stamps jitter
+# by a millisecond or two: the partner's frames of those periods, and frames whose stamps landed further
+# apart than max_skew_ms, cannot be paired, and are counted as unpaired. How many depends on how busy the
+# machine is (on CI's two cores beside the daemon, 266 of 596 pairs once; 138 unpaired another time, where
+# the cameras' skipped periods and late frames were 46: two stamps can each stay within the tolerance of
+# their own cadence and still be further than it from each other, so the cadence counts cannot bound the
+# unpaired). So neither the pairs nor the unpaired are held to a figure here; every frame the cameras
+# completed must be accounted for. Exact pairing is the exposure-stamped cameras' test above.
 start_camera 127.0.0.1 CAM-L
 start_camera 127.0.0.2 CAM-R
 RIGHT_PID=$CAM_PID
 wait_cameras 2
 stream_pair stock
 skipped=$(echo "$STATUS" | jq '.device | .left_skipped_periods + .right_skipped_periods + .left_irregular_intervals + .right_irregular_intervals')
-# (a fault costs at most two frames, its own and its partner's: a skipped period costs the partner's frame, a
-# late frame itself and the partner it missed; the +3 covers the cameras settling just after the first pair)
-[ "$UNPAIRED" -le $((2 * skipped + 3)) ] || fail "stock: $UNPAIRED unpaired frames, but the cameras skipped or were irregular only $skipped: $STATUS"
 # Every completed frame is in a pair, counted unpaired (at start-up or later) or discarded while settling; at
 # most a frame per camera may still be waiting for its partner when the last status was written.
 unaccounted=$(echo "$STATUS" | jq '(.device | .left_completed + .right_completed - .startup_unpaired - .settling_discarded)
@@ -200,8 +200,15 @@ awk -v s="$resume_s" 'BEGIN { exit !(s < 10) }' || fail "streaming resumed $resu
 grep -q '"source_state":"reconnecting"' "$WORK/reconnect.out" || fail "status never said reconnecting: $(grep -E "warn|reconnect" "$WORK/daemon.log" | tail -5)"
 status=$(last_status "$WORK/reconnect.out")
 outage=$(echo "$status" | jq '.drops.outage')
-[ "$outage" -gt 0 ] || fail "the outage cost no counted frame: $status"
-pass "right camera killed and restarted after 4 s: streaming resumed $resume_s s after it came back, client kept, outage counted as $outage frames"
+# The outage is the periods between the last pair before the kill and the first after the return, less one:
+# at least the 4 s the camera was away (119 frames at 30 fps), and what the frames' own arrival stamps show.
+gap_s=$(grep '"type":"frame"' "$WORK/reconnect.out" | cut -d' ' -f2- | jq -r '.t_host_ns' |
+	awk 'NR > 1 && $1 - prev > max { max = $1 - prev } { prev = $1 } END { printf "%.3f", max / 1e9 }')
+expected=$(awk -v g="$gap_s" 'BEGIN { printf "%d", g * 30 + 0.5 - 1 }')
+[ "$outage" -ge 119 ] || fail "the outage counted $outage frames; the camera was away for over 4 s (119 frames): $status"
+[ $((outage - expected)) -le 2 ] && [ $((expected - outage)) -le 2 ] ||
+	fail "the outage counted $outage frames; the frames' arrival stamps show a gap of $gap_s s ($expected frames)"
+pass "right camera killed and restarted after 4 s: streaming resumed $resume_s s after it came back, client kept, outage counted as $outage frames (the stamps' gap $gap_s s: $expected)"
 
 # ---------------------------------------------------------------------------------- 4. exact pixels
 IMAGES=""

@@ -180,6 +180,34 @@ TEST(FrameIdCounter, ThirtyTwoBitSequencesCountZero)
 	EXPECT_EQ(seq.add(3), 2U);
 }
 
+TEST(Outage, CountsThePeriodsBetweenTheLastFrameBeforeAndTheFirstAfter)
+{
+	constexpr int64_t kPeriod = 33'333'333; // 30 fps
+	OutageCounter outage(30);
+	for (int64_t i = 0; i < 10; ++i)
+		outage.delivered(i * kPeriod);
+	EXPECT_EQ(outage.lost(), 0U) << "no outage yet";
+	outage.delivered(15 * kPeriod);
+	EXPECT_EQ(outage.lost(), 0U) << "a gap without a reconnect is the frame counters' to count, not this";
+	outage.reconnected();
+	outage.delivered(15 * kPeriod + 500'000'000 + 2'000'000); // 0.5 s later, 2 ms of jitter
+	EXPECT_EQ(outage.lost(), 14U) << "15 periods, 14 frames never sent";
+	outage.delivered(16 * kPeriod + 500'000'000);
+	EXPECT_EQ(outage.lost(), 14U) << "the outage ended with the first frame after it";
+	outage.reconnected();
+	outage.delivered(17 * kPeriod + 500'000'000);
+	EXPECT_EQ(outage.lost(), 14U) << "reopened with no frame lost";
+	OutageCounter before_any(30);
+	before_any.reconnected();
+	before_any.delivered(5 * kPeriod);
+	EXPECT_EQ(before_any.lost(), 0U) << "nothing to measure from before the first frame";
+	OutageCounter no_rate;
+	no_rate.delivered(0);
+	no_rate.reconnected();
+	no_rate.delivered(10 * kPeriod);
+	EXPECT_EQ(no_rate.lost(), 0U) << "without a nominal rate nothing can be said";
+}
+
 TEST(Cadence, CountsSkippedPeriodsAndIrregularIntervals)
 {
 	const int64_t period = 33'333'333;

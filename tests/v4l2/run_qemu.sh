@@ -2,7 +2,8 @@
 # stereod's V4L2 driver against real kernel drivers: Debian's own kernel booted under QEMU (TCG, no KVM
 # needed) with a busybox initramfs, vivid (two virtual webcams) and v4l2loopback (fed side-by-side frames).
 # Inside the guest, v4l2_check runs the daemon's V4l2Source: a pair of vivid devices paired by timestamp, one
-# vivid device split side by side, and v4l2loopback checked pixel for pixel.
+# vivid device split side by side, both unplugged while streaming and reconnected (vivid's Disconnect
+# control), and v4l2loopback checked pixel for pixel.
 # Built from the recipe in ../shared/testbeds (build-v4l2-initramfs.sh); the project owns this copy.
 # Usage: run_qemu.sh BUILD_DIR       (v4l2_check and v4l2_feed are taken from BUILD_DIR/tests)
 # Exit 0 = every check passed, 77 = the bed cannot be built here (says why), 1 = a check failed.
@@ -81,6 +82,14 @@ v4l2_check --set v4l2.left=/dev/video0 --set v4l2.right=/dev/video1 --set v4l2.l
 # One vivid webcam read as a side-by-side stereo camera, in colour.
 v4l2_check --set v4l2.left=/dev/video0 --set v4l2.layout=side_by_side --set v4l2.pixel_format=YUYV \
 	--set v4l2.width=640 --set v4l2.height=360 --set v4l2.fps=30 --set v4l2.color=bgr --frames 30 || fail=1
+# Unplugged while streaming (vivid's Disconnect control; vivid comes back once the last file is closed):
+# the source says the device is lost, reconnect() reopens it, the frames come back and the outage is counted.
+# One device side by side, then the left of a pair (both are reopened).
+v4l2_check --set v4l2.left=/dev/video0 --set v4l2.layout=side_by_side --set v4l2.pixel_format=YUYV \
+	--set v4l2.width=640 --set v4l2.height=360 --set v4l2.fps=30 --frames 60 --disconnect-after 20 || fail=1
+v4l2_check --set v4l2.left=/dev/video0 --set v4l2.right=/dev/video1 --set v4l2.layout=pair \
+	--set v4l2.pixel_format=YUYV --set v4l2.width=640 --set v4l2.height=360 --set v4l2.fps=30 \
+	--set v4l2.max_skew_ms=17 --frames 60 --disconnect-after 20 || fail=1
 if [ -e /lib/modules/*/extra/v4l2loopback.ko ]; then
 	modprobe v4l2loopback devices=1 video_nr=10 card_label=stereo-sbs || { echo "TB: FAIL modprobe v4l2loopback"; exit 1; }
 	v4l2_feed /dev/video10 1280 480 240 30 &
@@ -102,6 +111,6 @@ timeout 240 qemu-system-x86_64 -accel tcg -smp 2 -m 768 -nographic -no-reboot -n
 grep -E "^(V4L2CHECK|TB:)" "$CACHE/guest.log" || true
 echo "QEMU V4L2 bed done in $(elapsed) s"
 grep -q "^TB: RESULT fail=0" "$CACHE/guest.log" || { echo "FAIL: see $CACHE/guest.log"; tail -20 "$CACHE/guest.log"; exit 1; }
-expected=$([ -f "$LOOP_KO" ] && echo 3 || echo 2)
+expected=$([ -f "$LOOP_KO" ] && echo 5 || echo 4)
 [ "$(grep -c '^V4L2CHECK ok' "$CACHE/guest.log")" -eq "$expected" ] || { echo "FAIL: expected $expected passing checks"; exit 1; }
 echo "ok: $expected V4L2 checks passed in the guest"
