@@ -3,7 +3,7 @@
 # needed) with a busybox initramfs, vivid (two virtual webcams) and v4l2loopback (fed side-by-side frames).
 # Inside the guest, v4l2_check runs the daemon's V4l2Source: a pair of vivid devices paired by timestamp, one
 # vivid device split side by side, both unplugged while streaming and reconnected (vivid's Disconnect
-# control), and v4l2loopback checked pixel for pixel.
+# control), and v4l2loopback checked pixel for pixel, then with its producer stopped and started again.
 # Built from the recipe in ../shared/testbeds (build-v4l2-initramfs.sh); the project owns this copy.
 # Usage: run_qemu.sh BUILD_DIR       (v4l2_check and v4l2_feed are taken from BUILD_DIR/tests)
 # Exit 0 = every check passed, 77 = the bed cannot be built here (says why), 1 = a check failed.
@@ -97,6 +97,15 @@ if [ -e /lib/modules/*/extra/v4l2loopback.ko ]; then
 	sleep 1
 	v4l2_check --set v4l2.left=/dev/video10 --set v4l2.layout=side_by_side --frames 60 --pattern || fail=1
 	kill $feeder 2>/dev/null
+	wait $feeder 2>/dev/null
+	# A camera that falls silent without going away: the producer stops after 2 s and a new one starts 1.5 s
+	# later. The silence is found by v4l2.no_frame_timeout_s, the device reopened until it sends again.
+	(v4l2_feed /dev/video10 1280 480 60 30; sleep 1.5; v4l2_feed /dev/video10 1280 480 150 30) &
+	feeder=$!
+	sleep 1
+	v4l2_check --set v4l2.left=/dev/video10 --set v4l2.layout=side_by_side --set v4l2.no_frame_timeout_s=0.5 \
+		--frames 80 --pattern --expect-loss || fail=1
+	kill $feeder 2>/dev/null
 fi
 exit $fail
 GUEST
@@ -111,6 +120,6 @@ timeout 240 qemu-system-x86_64 -accel tcg -smp 2 -m 768 -nographic -no-reboot -n
 grep -E "^(V4L2CHECK|TB:)" "$CACHE/guest.log" || true
 echo "QEMU V4L2 bed done in $(elapsed) s"
 grep -q "^TB: RESULT fail=0" "$CACHE/guest.log" || { echo "FAIL: see $CACHE/guest.log"; tail -20 "$CACHE/guest.log"; exit 1; }
-expected=$([ -f "$LOOP_KO" ] && echo 5 || echo 4)
+expected=$([ -f "$LOOP_KO" ] && echo 6 || echo 4)
 [ "$(grep -c '^V4L2CHECK ok' "$CACHE/guest.log")" -eq "$expected" ] || { echo "FAIL: expected $expected passing checks"; exit 1; }
 echo "ok: $expected V4L2 checks passed in the guest"
