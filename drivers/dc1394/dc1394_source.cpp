@@ -61,6 +61,7 @@ public:
 		info_.description = description_;
 		info_.geometry = {width_, height_, recipe_.output, true, false, false, config_.frame_rate};
 		info_.live = true;
+		outage_.set_rate(config_.frame_rate);
 	}
 
 	~Dc1394Source() override { close_camera(); }
@@ -107,6 +108,7 @@ public:
 		into.sequence = ++sequence_;
 		into.device_ns = embedded_stamp_ ? clock_.to_host(device) : arrival;
 		into.host_ns = arrival;
+		outage_.delivered(arrival);
 		into.lr_skew_ns = 0; // one sensor board, one exposure trigger
 		dc1394_capture_enqueue(camera_.get(), frame);
 		return GrabStatus::Frame;
@@ -121,12 +123,14 @@ public:
 			spdlog::debug("dc1394: reconnect: {}", e.what());
 			return false;
 		}
+		outage_.reconnected(); // counted at the first frame after it (OutageCounter)
 		return true;
 	}
 
 	SourceCounters counters() const override
 	{
 		SourceCounters out;
+		out.drops["outage"] = outage_.lost();
 		out.device["frames_behind_max"] = static_cast<int64_t>(behind_max_.load());
 		out.device["clock_restarts"] = static_cast<int64_t>(clock_restarts_.load());
 		return out;
@@ -244,6 +248,7 @@ private:
 	int64_t last_frame_ns_ = 0;
 	uint64_t sequence_ = 0;
 	std::atomic<uint64_t> behind_max_{0}, clock_restarts_{0};
+	camera::OutageCounter outage_;
 };
 
 } // namespace
