@@ -181,7 +181,7 @@ public:
 			DeviceState &state = devices_[side];
 			if ((side == kLeft || paired_) && state.device && !state.device->streaming()) {
 				state.device->start();
-				state.last_frame_ns = monotonic_ns();
+				state.last_frame_ns = monotonic_ns(); // a silence is timed from here, not the opening
 			}
 		}
 	}
@@ -214,7 +214,6 @@ public:
 			}
 			devices_[side].device = std::move(fresh[side]);
 			devices_[side].sequence.reset();
-			devices_[side].last_frame_ns = monotonic_ns();
 		}
 		outage_.reconnected(); // counted at the first frame after it (OutageCounter)
 		return true;
@@ -244,7 +243,6 @@ private:
 	{
 		DeviceState &state = devices_[side];
 		state.device = std::make_unique<V4l2Device>(side == kLeft ? config_.left : config_.right, config_);
-		state.last_frame_ns = monotonic_ns();
 	}
 
 	void check_format(const V4l2Device &device) const
