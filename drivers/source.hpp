@@ -130,7 +130,9 @@ class FrameSource
 public:
 	virtual ~FrameSource() = default;
 	[[nodiscard]] virtual const SourceInfo &info() const = 0;
-	/// Fills `into` (allocated at info().geometry) in place. Must not allocate in steady state.
+	/// Fills `into` (allocated at info().geometry) in place. Must not allocate in steady state
+	/// (tests/alloc counts it for the cameras' paths and replay; the sim's OpenCV warps and the image-folder
+	/// datasets' decoders allocate inside OpenCV).
 	virtual GrabStatus grab(StereoFrame &into) = 0;
 	/// After Lost: tries to get the device back; true when grabbing may resume.
 	virtual bool reconnect() { return false; }
