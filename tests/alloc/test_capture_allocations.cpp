@@ -1,7 +1,6 @@
 // The capture path allocates nothing in steady state (FrameSource::grab's contract, the design card's "no
-// allocation on the capture path"): every heap allocation of the process is counted here, C's malloc family
-// (which OpenCV's image buffers and C libraries use) and through it C++'s operator new, by interposing glibc's
-// malloc in this test binary alone, while a source grabs into a pool frame that then goes through the ring,
+// allocation on the capture path"): every heap allocation of the process is counted here (malloc_counter.hpp)
+// while a source grabs into a pool frame that then goes through the ring,
 // as Pipeline::capture_loop does. A source's first frames may allocate (lazily sized buffers); the frames
 // after them must not.
 #include <gtest/gtest.h>
@@ -16,79 +15,11 @@
 #include "drivers/camera_frames.hpp"
 #include "drivers/replay/recording.hpp"
 #include "drivers/source.hpp"
+#include "tests/alloc/malloc_counter.hpp"
 
 #include <arv.h>
 
-// glibc's own allocator, under the names it exports for interposers like this one.
-extern "C" {
-void *__libc_malloc(size_t size);
-void *__libc_calloc(size_t count, size_t size);
-void *__libc_realloc(void *p, size_t size);
-void *__libc_memalign(size_t alignment, size_t size);
-}
-
-namespace {
-
-// The counter has to be a global: malloc is one. Counted only while armed, from every thread (a source that
-// hands work to OpenCV's workers allocates through them too).
-std::atomic<bool> g_armed{false};
-std::atomic<uint64_t> g_allocations{0};
-
-void count()
-{
-	if (g_armed.load(std::memory_order_relaxed))
-		g_allocations.fetch_add(1, std::memory_order_relaxed);
-}
-
-/// Allocations made while `run` runs.
-template <typename F>
-uint64_t allocations_during(F &&run)
-{
-	g_allocations.store(0);
-	g_armed.store(true);
-	run();
-	g_armed.store(false);
-	return g_allocations.load();
-}
-
-} // namespace
-
-extern "C" {
-void *malloc(size_t size)
-{
-	count();
-	return __libc_malloc(size);
-}
-void *calloc(size_t n, size_t size)
-{
-	count();
-	return __libc_calloc(n, size);
-}
-void *realloc(void *p, size_t size)
-{
-	count();
-	return __libc_realloc(p, size);
-}
-void *memalign(size_t alignment, size_t size)
-{
-	count();
-	return __libc_memalign(alignment, size);
-}
-void *aligned_alloc(size_t alignment, size_t size)
-{
-	count();
-	return __libc_memalign(alignment, size);
-}
-int posix_memalign(void **out, size_t alignment, size_t size)
-{
-	count();
-	void *p = __libc_memalign(alignment, size);
-	if (p == nullptr)
-		return ENOMEM;
-	*out = p;
-	return 0;
-}
-}
+using stereod::test::allocations_during;
 
 using namespace stereod;
 

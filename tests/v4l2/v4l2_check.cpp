@@ -31,6 +31,7 @@
 
 #include "core/clock.hpp"
 #include "drivers/builtin.hpp"
+#include "tests/alloc/malloc_counter.hpp"
 #include "tests/v4l2/pattern.hpp"
 
 using namespace stereod;
@@ -132,7 +133,19 @@ int main(int argc, char **argv)
 	const auto &info = source->info();
 	StereoFrame frame;
 	frame.allocate(info.geometry);
+	{
+		// The counter must see an image buffer being allocated, or the count below would prove nothing.
+		cv::Mat probe;
+		if (test::allocations_during([&] { probe.create(8, 8, CV_8UC1); }) == 0) {
+			std::printf("V4L2CHECK FAIL the allocation counter is not in effect\n");
+			return 1;
+		}
+	}
 	int got = 0, timeouts = 0, bad_pixels = 0, not_ok = 0;
+	// A run without a loss is the steady state: from the 10th frame on, its grabs must not allocate
+	// (FrameSource::grab's contract), counted over the whole process.
+	constexpr int kCountFrom = 10;
+	uint64_t allocations = 0;
 	uint64_t last_seq = 0, gaps = 0;
 	int64_t first_t = 0, last_t = 0, max_skew = 0;
 	bool monotonic = true;
@@ -152,9 +165,15 @@ int main(int argc, char **argv)
 			unplugged_ns = monotonic_ns();
 		}
 		drivers::GrabStatus status{};
+		const bool counting = !expect_loss && got >= kCountFrom;
 		try {
+			test::count_allocations(counting);
 			status = source->grab(frame);
+			test::count_allocations(false);
+			if (counting)
+				allocations += test::allocations_counted();
 		} catch (const std::exception &e) {
+			test::count_allocations(false);
 			std::printf("V4L2CHECK note: grab threw: %s\n", e.what());
 			status = drivers::GrabStatus::Lost; // the daemon's capture loop takes it so
 		}
@@ -224,7 +243,7 @@ int main(int argc, char **argv)
 	// the nominal rate between the last frame before it and the first after, less one, give or take one.
 	const long long expected_outage =
 		gap_ns > 0 ? std::llround(static_cast<double>(gap_ns) * 1e-9 * info.geometry.nominal_fps) - 1 : -1;
-	const bool ok = got == frames && monotonic && (!pattern || bad_pixels == 0) &&
+	const bool ok = got == frames && monotonic && (!pattern || bad_pixels == 0) && allocations == 0 &&
 			(!expect_loss || (expected_outage > 0 &&
 					  std::llabs(static_cast<long long>(drop("outage")) - expected_outage) <= 1));
 	std::printf("V4L2CHECK %s frames=%d eye=%dx%d fps=%.2f seq_gaps=%llu monotonic=%d max_skew_ms=%.2f not_ok=%d "
@@ -232,6 +251,9 @@ int main(int argc, char **argv)
 		    ok ? "ok" : "FAIL", got, info.geometry.width, info.geometry.height,
 		    got > 1 && span > 0 ? (got - 1) / span : 0.0, static_cast<unsigned long long>(gaps),
 		    monotonic ? 1 : 0, static_cast<double>(max_skew) * 1e-6, not_ok, bad_pixels, drop("unpaired"));
+	if (!expect_loss)
+		std::printf(" allocations=%llu (grabs from frame %d on)", static_cast<unsigned long long>(allocations),
+			    kCountFrom);
 	if (expect_loss)
 		std::printf(" unplugged_after=%d lost_after_ms=%.1f reconnects=%d reopened_in_ms=%.1f gap_ms=%.1f "
 			    "outage_frames=%llu expected=%lld frames_after=%d",
