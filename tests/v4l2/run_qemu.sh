@@ -4,7 +4,8 @@
 # Inside the guest, v4l2_check runs the daemon's V4l2Source: a pair of vivid devices paired by timestamp, one
 # vivid device split side by side, both unplugged while streaming and reconnected (vivid's Disconnect
 # control), and v4l2loopback checked pixel for pixel (GREY, then MJPG), then with its producer stopped and
-# started again. In the runs without a loss, no grab from the 10th frame on may allocate (MJPG excepted).
+# started again. In the runs without a loss, at most one grab from the 10th frame on may allocate (MJPG
+# excepted: libjpeg allocates per image).
 # Built from the recipe in ../shared/testbeds (build-v4l2-initramfs.sh); the project owns this copy.
 # Usage: run_qemu.sh BUILD_DIR       (v4l2_check and v4l2_feed are taken from BUILD_DIR/tests)
 # Exit 0 = every check passed, 77 = the bed cannot be built here (says why), 1 = a check failed.
