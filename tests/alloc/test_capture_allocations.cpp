@@ -7,10 +7,7 @@
 // one-off; docs/architecture.md). Each counted frame is counted on its own.
 #include <gtest/gtest.h>
 
-#include <atomic>
-#include <cstdlib>
 #include <filesystem>
-#include <ostream>
 #include <unistd.h>
 
 #include "core/frame_pool.hpp"
@@ -23,30 +20,11 @@
 #include <arv.h>
 
 using stereod::test::allocations_during;
+using stereod::test::FrameAllocations;
 
 using namespace stereod;
 
 namespace {
-
-/// Allocations frame by frame.
-struct FrameAllocations {
-	uint64_t total = 0;
-	int frames = 0, frames_allocating = 0;
-	bool delivered = true;
-	void add(uint64_t n)
-	{
-		total += n;
-		++frames;
-		frames_allocating += n > 0 ? 1 : 0;
-	}
-	/// The steady state: no frame allocates, but for one one-off.
-	[[nodiscard]] bool steady() const { return frames_allocating <= 1; }
-};
-
-std::ostream &operator<<(std::ostream &out, const FrameAllocations &a)
-{
-	return out << a.total << " allocations in " << a.frames_allocating << " of " << a.frames << " frames";
-}
 
 /// What Pipeline::capture_loop does with one frame: a pool slot, the source's grab into it, the slot's index
 /// through the ring, and the consumer's adopting it and giving it back.
