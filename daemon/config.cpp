@@ -756,6 +756,16 @@ const std::vector<Option> &options()
 			"(negative: not cut)",
 			[](DaemonConfig &c) -> int & { return c.motion.groups.split_gap_cells; }, -1, 1000));
 		o.push_back(number(
+			"groups", "box_margin_px",
+			"sparse: a group's box is its feature points' extent grown by this many pixels (the body "
+			"reaches beyond its corners)",
+			[](DaemonConfig &c) -> double & { return c.motion.groups.box_margin_px; }, 0, 10000));
+		o.push_back(number(
+			"groups", "split_gap_px",
+			"sparse, feature points without depth (monocular): a cluster is cut into connected parts of "
+			"points at most this many pixels apart (0: not cut)",
+			[](DaemonConfig &c) -> double & { return c.motion.groups.split_gap_px; }, 0, 100000));
+		o.push_back(number(
 			"groups", "split_same_depth",
 			"regions of a cut cluster (lk / dis), and clusters that move alike no farther apart than the "
 			"larger one's longer side (lk / dis) or merge_reach_m (sparse), whose median depths agree "

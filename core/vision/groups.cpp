@@ -168,10 +168,9 @@ double box_fill(const std::vector<uint32_t> &members, const std::vector<MotionPo
 /// Propagation with seed 002's preference makes few clusters, and two people walking alike far apart land
 /// in one; a mover is one region.
 std::vector<std::vector<uint32_t>> connected_parts(const std::vector<uint32_t> &members,
-						   const std::vector<MotionPoint> &points, double step, int gap_cells,
+						   const std::vector<MotionPoint> &points, double reach,
 						   double same_depth_ratio)
 {
-	const double reach = (gap_cells + 1.5) * step; // half a cell of slack: positions moved by the flow
 	std::vector<uint32_t> parent(members.size());
 	for (size_t i = 0; i < parent.size(); ++i)
 		parent[i] = static_cast<uint32_t>(i);
@@ -340,10 +339,16 @@ void join_groups(const std::vector<MotionPoint> &points, const GroupOutput &foun
 		if (strength < params.min_flow_px)
 			continue;
 		const auto &b = found.groups[g].box_px;
+		// Feature points join inside their group's members' extent, not its published box: the margin
+		// covers the mover's body beyond its corners, but a point in that band that moves the mover's way
+		// is as often a corner of its outline on the background beside it (on the sim, joining in the
+		// margin cost the labels' precision 0.005-0.025). A grid's cells cover their margin.
+		const double in = params.member_area_px2 > 0 ? 0.0 : params.box_margin_px;
 		for (size_t i = 0; i < points.size() && i < group_of_point.size(); ++i) {
 			const MotionPoint &p = points[i];
-			if (group_of_point[i] < 0 && p.px.x >= b[0] && p.px.x <= b[2] && p.px.y >= b[1] &&
-			    p.px.y <= b[3] && moves_with(p.residual, group_residual, params.label_tolerance_px))
+			if (group_of_point[i] < 0 && p.px.x >= b[0] + in && p.px.x <= b[2] - in &&
+			    p.px.y >= b[1] + in && p.px.y <= b[3] - in &&
+			    moves_with(p.residual, group_residual, params.label_tolerance_px))
 				group_of_point[i] = static_cast<int>(g);
 		}
 	}
@@ -427,8 +432,18 @@ ClusterRound cluster_round(const std::vector<uint32_t> &chosen, const std::vecto
 			unplaced->insert(unplaced->end(), leaves, members.end());
 		members.erase(leaves, members.end());
 		if (params.member_area_px2 > 0 && params.split_gap_cells >= 0) {
-			for (auto &part : connected_parts(members, points, std::sqrt(params.member_area_px2),
-							  params.split_gap_cells, params.split_same_depth))
+			// Half a cell of slack: the cells' positions have moved by their flow.
+			const double reach = (params.split_gap_cells + 1.5) * std::sqrt(params.member_area_px2);
+			for (auto &part : connected_parts(members, points, reach, params.split_same_depth))
+				place(std::move(part));
+		} else if (params.member_area_px2 <= 0 && params.split_gap_px > 0 &&
+			   std::none_of(members.begin(), members.end(),
+					[&](uint32_t i) { return points[i].xyz.has_value(); })) {
+			// Feature points without depth (monocular footage) cut into their connected parts: without
+			// the disparity dimension, walkers metres apart who move alike are one cluster whose box
+			// spans the ground between them. With depth they are told apart by it, and the depth rules
+			// (merge_alike) keep a near mover's scattered pieces together, which a cut in pixels breaks.
+			for (auto &part : connected_parts(members, points, params.split_gap_px, 0))
 				place(std::move(part));
 		} else {
 			place(std::move(members));

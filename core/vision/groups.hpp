@@ -65,9 +65,11 @@ struct GroupParams {
 	/// clusters and tracks move alike. Tighter than the labels' (at 2 px patches of flow noise under pure
 	/// rotation join into groups).
 	double member_tolerance_px = 1.0;
-	/// Added around the members' extent to make a group's box (the pipeline's: half a cell when the members
-	/// are the dense flow's grid cells, whose positions are the cells' centres).
-	double box_margin_px = 0;
+	/// Added around the members' extent to make a group's box. Feature points are corners inside a mover's
+	/// outline, so the body reaches beyond them (the default; points join by label_points inside the
+	/// members' extent only). The pipeline sets half a cell when the members are the dense flow's grid
+	/// cells, whose positions are the cells' centres.
+	double box_margin_px = 8;
 	/// The pipeline's too: the image area one member stands for (a dense grid's cell, side squared; 0 for
 	/// feature points). With it a cluster must cover at least `min_box_fill` of its box: a few scattered
 	/// cells of flow noise that clustered together are not a mover, which is a region.
@@ -79,6 +81,9 @@ struct GroupParams {
 	/// ... except that regions whose median depths agree within this share of the nearer stay one (stereo
 	/// and RGB-D); 0: depth is not looked at.
 	double split_same_depth = 0.1;
+	/// Feature points without depth (no member_area_px2, monocular footage): a cluster is cut into its
+	/// connected parts, points at most this many pixels apart in both directions being connected; 0: not cut.
+	double split_gap_px = 45;
 	/// Feature points (the sparse flow) with depth: clusters that move alike, whose median depths agree
 	/// within `split_same_depth`, and whose boxes are at most this far apart (metres at the nearer depth)
 	/// are one group. Affinity Propagation's nearest-neighbour messages cut a near mover's points into

@@ -565,3 +565,90 @@ TEST(Groups, ASmallMoverBesideALargeOneIsClusteredAgain)
 		}
 	}
 }
+
+TEST(Groups, MonocularMoversApartWhoMoveAlikeAreCutApart)
+{
+	// Three walkers on monocular footage, 10 feature points each (2 columns 8 px apart, 5 rows 12 px apart),
+	// all moving 3 px per frame to the right, their nearest points 62 px apart, and a fourth walker far off
+	// moving left: Affinity Propagation (the seed's preference, from the farthest pair; position scale 40 px)
+	// puts the three in one cluster, whose box spans the ground between them. Cut at gaps over split_gap_px (45),
+	// each is a group of its own with its box on it: the members' extent grown by box_margin_px. A still point
+	// beside a walker in that margin does not join it; a slow one inside the members' extent, moving its way, does
+	// (the label rule). With depth the cut does not apply: the walkers, at one depth and within merge_reach_m, are
+	// one group as before.
+	const std::array<float, 3> x0 = {100.F, 170.F, 240.F};
+	for (const bool with_depth : {false, true})
+		for (const double gap : {0.0, 45.0}) {
+			geometry::StereoRig rig;
+			rig.fx = rig.fy = 900;
+			rig.cx = 320;
+			rig.cy = 240;
+			rig.baseline_m = 0.12;
+			std::vector<MotionPoint> points;
+			for (const float x : x0)
+				for (int i = 0; i < 10; ++i) {
+					MotionPoint p;
+					p.px = {x + static_cast<float>(i % 2) * 8.F,
+						200.F + static_cast<float>(i / 2) * 12.F};
+					p.flow = p.residual = {3.F, 0.F};
+					p.dynamic = true;
+					if (with_depth)
+						p.xyz = cv::Vec3f(static_cast<float>((p.px.x - rig.cx) * 6 / rig.fx),
+								  static_cast<float>((p.px.y - rig.cy) * 6 / rig.fy),
+								  6.F);
+					points.push_back(p);
+				}
+			for (int i = 0; i < 10; ++i) {
+				MotionPoint p;
+				p.px = {600.F + static_cast<float>(i % 2) * 8.F,
+					400.F + static_cast<float>(i / 2) * 12.F};
+				p.flow = p.residual = {-3.F, 0.F};
+				p.dynamic = true;
+				if (with_depth)
+					p.xyz = cv::Vec3f(static_cast<float>((p.px.x - rig.cx) * 6 / rig.fx),
+							  static_cast<float>((p.px.y - rig.cy) * 6 / rig.fy), 6.F);
+				points.push_back(p);
+			}
+			MotionPoint inside; // within the first walker's points, slower but its way
+			inside.px = {104.F, 230.F};
+			inside.flow = inside.residual = {1.8F, 0.F};
+			MotionPoint beside = inside; // the same motion, in the first walker's margin
+			beside.px = {114.F, 230.F};
+			points.push_back(inside);
+			points.push_back(beside);
+			GroupParams params;
+			params.members = GroupMembers::Labels;
+			params.split_gap_px = gap;
+			GroupMotionContext context;
+			context.dt_s = 0.1;
+			if (with_depth)
+				context.rig = rig;
+			AffinityPropagation workspace;
+			const GroupOutput first = find_groups(points, nullptr, context, params, workspace);
+			const GroupOutput out = find_groups(points, &first.memory, context, params, workspace);
+			const std::string label =
+				std::string(with_depth ? "depth" : "no depth") + ", gap " + std::to_string(gap);
+			const auto walking_right = [](const TargetGroup &g) { return g.image_velocity_pxps[0] > 0; };
+			if (with_depth || gap == 0) {
+				ASSERT_EQ(out.groups.size(), 2u) << label;
+				const auto three = std::find_if(out.groups.begin(), out.groups.end(), walking_right);
+				ASSERT_NE(three, out.groups.end()) << label;
+				EXPECT_EQ(three->point_count, 30) << label;
+				continue;
+			}
+			ASSERT_EQ(out.groups.size(), 4u) << label;
+			for (const TargetGroup &g : out.groups) {
+				if (!walking_right(g))
+					continue;
+				EXPECT_EQ(g.point_count, 10) << label;
+				const float left = g.box_px[0] + static_cast<float>(params.box_margin_px);
+				EXPECT_TRUE(std::any_of(x0.begin(), x0.end(),
+							[&](float x) { return std::abs(left - x) < 0.01F; }))
+					<< "box from " << g.box_px[0] << ": " << label;
+				EXPECT_NEAR(g.box_px[2] - g.box_px[0], 8 + 2 * params.box_margin_px, 0.01) << label;
+			}
+			const size_t n = points.size();
+			EXPECT_GE(out.group_of_point[n - 2], 0) << "the slow point inside joins: " << label;
+			EXPECT_EQ(out.group_of_point[n - 1], -1) << "the point beside stays out: " << label;
+		}
+}
