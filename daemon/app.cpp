@@ -24,6 +24,7 @@
 #include <spdlog/spdlog.h>
 #include <systemd/sd-daemon.h>
 
+#include "core/camera/timing.hpp"
 #include "core/clock.hpp"
 #include "core/geometry/rectify.hpp"
 #include "core/geometry/rig.hpp"
@@ -412,6 +413,25 @@ int run_daemon(const DaemonConfig &initial, const std::function<DaemonConfig()> 
 	WatchdogSample last_sample{0, 0, monotonic_ns()};
 	bool watchdog_withheld = false;
 
+	// What reloads that rebuilt the pipeline cost a live source (status `drops.reload`): the frames it sent
+	// between the old pipeline's last capture and the new one's first, at the old source's nominal rate
+	// (an outage of the daemon's own making, counted as a camera's), and the old backlog its drain left
+	// unprocessed. The new pipeline's own counters start at zero with its `hello`; this one does not.
+	camera::OutageCounter reload_gap;
+	uint64_t reload_unprocessed = 0;
+	int64_t reload_gap_from_ns = 0; // the old pipeline's last capture while a gap is open
+	const auto close_reload_gap = [&](const PipelineStats &s) {
+		if (reload_gap_from_ns > 0 && s.first_capture_host_ns > 0) {
+			const uint64_t before = reload_gap.lost();
+			reload_gap.delivered(s.first_capture_host_ns);
+			spdlog::info("reload: capture paused {:.0f} ms, {} frames of the live source not captured "
+				     "(drops.reload)",
+				     static_cast<double>(s.first_capture_host_ns - reload_gap_from_ns) * 1e-6,
+				     reload_gap.lost() - before);
+			reload_gap_from_ns = 0;
+		}
+	};
+
 	const int64_t start_ns = monotonic_ns();
 	int64_t next_status_ns = start_ns + static_cast<int64_t>(config.output.status_interval_s * 1e9);
 	int64_t next_log_ns = start_ns + 10'000'000'000;
@@ -420,8 +440,10 @@ int run_daemon(const DaemonConfig &initial, const std::function<DaemonConfig()> 
 	auto emit_status = [&] {
 		const SocketServerStats server_stats = server->stats();
 		const PipelineStats s = pipeline->stats();
+		close_reload_gap(s);
 		const auto [capture_fps, publish_fps] = meter.update(s.frames_captured, s.frames_published);
 		auto report = make_status(*pipeline, s, server_stats, start_ns, capture_fps, publish_fps);
+		report.drops["reload"] = reload_gap.lost() + reload_unprocessed;
 		if (recorder)
 			report.recording = recorder->stats();
 		if (dds) {
@@ -485,6 +507,15 @@ int run_daemon(const DaemonConfig &initial, const std::function<DaemonConfig()> 
 					spdlog::info("reload: rebuilding the source and the pipeline");
 					pipeline->request_stop();
 					pipeline->wait();
+					const PipelineStats old = pipeline->stats();
+					const drivers::SourceInfo &old_info = pipeline->source_info();
+					reload_unprocessed += old.dropped_at_stop;
+					if (old_info.live && old.last_capture_host_ns > 0) {
+						reload_gap.set_rate(old_info.geometry.nominal_fps);
+						reload_gap.delivered(old.last_capture_host_ns);
+						reload_gap.reconnected();
+						reload_gap_from_ns = old.last_capture_host_ns;
+					}
 					pipeline.reset();
 					try {
 						pipeline = build_pipeline(next);
@@ -495,6 +526,12 @@ int run_daemon(const DaemonConfig &initial, const std::function<DaemonConfig()> 
 							e.what());
 						pipeline = build_pipeline(config);
 						next = config;
+					}
+					// A file or a batch source loses nothing while it waits: the gap closes
+					// uncounted.
+					if (reload_gap_from_ns > 0 && !pipeline->source_info().live) {
+						reload_gap.delivered(reload_gap_from_ns);
+						reload_gap_from_ns = 0;
 					}
 					meter = RateMeter();
 					last_sample = {0, 0, monotonic_ns()};

@@ -129,6 +129,8 @@ PipelineStats Pipeline::stats() const
 	s.processing_errors = processing_errors_.load();
 	s.reconnects = reconnects_.load();
 	s.dropped_at_stop = dropped_at_stop_.load();
+	s.first_capture_host_ns = first_capture_host_ns_.load();
+	s.last_capture_host_ns = last_capture_host_ns_.load();
 	return s;
 }
 
@@ -176,6 +178,10 @@ void Pipeline::capture_loop()
 		}
 
 		captured_.fetch_add(1);
+		const int64_t host_ns = target.host_ns > 0 ? target.host_ns : monotonic_ns();
+		if (first_capture_host_ns_.load(std::memory_order_relaxed) == 0)
+			first_capture_host_ns_.store(host_ns);
+		last_capture_host_ns_.store(host_ns);
 		if (have_last && target.sequence > last_sequence + 1)
 			source_gaps_.fetch_add(target.sequence - last_sequence - 1);
 		have_last = true;

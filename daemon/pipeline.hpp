@@ -61,7 +61,11 @@ struct PipelineStats {
 	uint64_t processing_errors = 0; ///< frames a stage threw on
 	uint64_t reconnects = 0;
 	uint64_t dropped_at_stop = 0; ///< live backlog left unprocessed when the drain time ran out
-	int64_t capture_turn_ns = 0;  ///< CLOCK_MONOTONIC of the capture loop's last turn (daemon/watchdog.hpp)
+	/// CLOCK_MONOTONIC at which the first and the last captured frame were complete on the host (0: none
+	/// yet): a reload that rebuilds the pipeline measures the stream's pause from them.
+	int64_t first_capture_host_ns = 0;
+	int64_t last_capture_host_ns = 0;
+	int64_t capture_turn_ns = 0; ///< CLOCK_MONOTONIC of the capture loop's last turn (daemon/watchdog.hpp)
 	protocol::LatencySummary capture_to_publish;
 	std::optional<protocol::StatusReport::StereoHealth> stereo; ///< stereo sources: calibration health
 };
@@ -143,6 +147,7 @@ private:
 	std::atomic<bool> finished_{false};
 	std::atomic<uint64_t> captured_{0}, published_{0}, pool_exhausted_{0}, source_gaps_{0}, corrupt_{0},
 		processing_errors_{0}, reconnects_{0}, dropped_at_stop_{0};
+	std::atomic<int64_t> first_capture_host_ns_{0}, last_capture_host_ns_{0};
 	std::atomic<int64_t> stop_deadline_ns_{0};
 	std::atomic<int64_t> capture_turn_ns_{0}; ///< the capture loop's last turn (for the watchdog)
 	mutable std::mutex state_mutex_;

@@ -98,4 +98,18 @@ frames_after=$(grep -c '"type":"frame"' "$WORK/client.out" || true)
 [ -S "$WORK/elsewhere.sock" ] && fail "the refused config moved the socket"
 [ "$(grep -c '"type":"hello"' "$WORK/client.out")" -eq 2 ] ||
 	fail "the client was not told of the rebuilt source by a second hello"
+# What the rebuild cost the live sim, in status drops.reload: the 30 fps periods between the last frame before
+# the second hello and the first after it, less one, from their t_host_ns (when each was complete on the host).
+paused=$(jq -s '[.[] | select(.type == "hello" or .type == "frame")] as $m
+	| ([range(0; $m | length) | select($m[.].type == "hello")][1]) as $h
+	| {frames: ((($m[$h + 1].t_host_ns - $m[$h - 1].t_host_ns) * 30 / 1e9 | round) - 1),
+	   ms: (($m[$h + 1].t_host_ns - $m[$h - 1].t_host_ns) / 1e6 | round)}' "$WORK/client.out")
+counted=$(jq -s '[.[] | select(.type == "status")] | last | .drops.reload' "$WORK/client.out")
+expected=$(jq .frames <<<"$paused")
+[ "$expected" -gt 0 ] || fail "no pause seen across the rebuild: $paused"
+[ "$counted" = "$expected" ] ||
+	fail "drops.reload is $counted, the client saw a pause of $(jq .ms <<<"$paused") ms: $expected frames at 30 fps"
+grep -q "reload: capture paused [0-9]* ms, $counted frames of the live source not captured" "$WORK/reload.log" ||
+	fail "the pause was not logged: $(grep 'reload:' "$WORK/reload.log")"
+echo "reload: paused $(jq .ms <<<"$paused") ms, drops.reload $counted"
 pass "reload: classifier.texture_threshold (pipeline rebuilt in place) and output.max_clients (live) applied with the client connected ($frames_before_bad frames by then, $frames_after in all); a config with an unknown key refused by file:line:key, the running one kept; RELOADING=1 + MONOTONIC_USEC then READY=1 each time"
