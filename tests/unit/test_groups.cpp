@@ -147,6 +147,23 @@ TEST(AffinityPropagation, TrivialSizes)
 
 namespace {
 
+/// A rig like a 640x480 camera's with a 12 cm baseline, for points given depth by at_depth.
+geometry::StereoRig test_rig()
+{
+	geometry::StereoRig rig;
+	rig.fx = rig.fy = 900;
+	rig.cx = 320;
+	rig.cy = 240;
+	rig.baseline_m = 0.12;
+	return rig;
+}
+
+/// Where pixel `px` lies at depth `z` in `rig`'s camera.
+cv::Vec3f at_depth(cv::Point2f px, float z, const geometry::StereoRig &rig)
+{
+	return {static_cast<float>((px.x - rig.cx) * z / rig.fx), static_cast<float>((px.y - rig.cy) * z / rig.fy), z};
+}
+
 /// One frame of a constructed scene: a static background (residual ~0, a little noise) and two groups
 /// of 20 points crossing each other, A (rows 200-240) moving right, B (rows 260-300) moving left.
 std::vector<MotionPoint> crossing_frame(int frame, std::mt19937 &rng)
@@ -479,11 +496,7 @@ TEST(Groups, PiecesOfANearMoverAtOneDepthAreOneGroup)
 		double reach_m;
 		size_t groups;
 	};
-	geometry::StereoRig rig;
-	rig.fx = rig.fy = 900;
-	rig.cx = 320;
-	rig.cy = 240;
-	rig.baseline_m = 0.12;
+	const geometry::StereoRig rig = test_rig();
 	for (const Case c : {Case{150, 3, 1.0, 1}, Case{150, 5, 1.0, 2}, Case{150, 0, 1.0, 2}, Case{450, 3, 1.0, 2},
 			     Case{150, 3, 0.0, 2}}) {
 		GroupParams params;
@@ -504,8 +517,7 @@ TEST(Groups, PiecesOfANearMoverAtOneDepthAreOneGroup)
 				p.dynamic = true;
 				const float z = piece == 0 ? 3.F : c.depth_b;
 				if (c.depth_b > 0)
-					p.xyz = cv::Vec3f(static_cast<float>((p.px.x - rig.cx) * z / rig.fx),
-							  static_cast<float>((p.px.y - rig.cy) * z / rig.fy), z);
+					p.xyz = at_depth(p.px, z, rig);
 				points.push_back(p);
 			}
 		const GroupOutput first = find_groups(points, nullptr, context, params, workspace);
@@ -571,44 +583,31 @@ TEST(Groups, MonocularMoversApartWhoMoveAlikeAreCutApart)
 	// Three walkers on monocular footage, 10 feature points each (2 columns 8 px apart, 5 rows 12 px apart),
 	// all moving 3 px per frame to the right, their nearest points 62 px apart, and a fourth walker far off
 	// moving left: Affinity Propagation (the seed's preference, from the farthest pair; position scale 40 px)
-	// puts the three in one cluster, whose box spans the ground between them. Cut at gaps over split_gap_px (45),
-	// each is a group of its own with its box on it: the members' extent grown by box_margin_px. A still point
-	// beside a walker in that margin does not join it; a slow one inside the members' extent, moving its way, does
-	// (the label rule). With depth the cut does not apply: the walkers, at one depth and within merge_reach_m, are
-	// one group as before.
+	// puts the three in one cluster, whose box spans the ground between them. Cut at gaps over split_gap_px
+	// (45), each is a group of its own with its box on it: the members' extent grown by box_margin_px. Of two
+	// slow points moving a walker's way, the one inside its members' extent joins it (the label rule); the one
+	// beside it, in the margin, does not. With depth the cut does not apply: the walkers, at one depth and
+	// within merge_reach_m, are one group as before.
 	const std::array<float, 3> x0 = {100.F, 170.F, 240.F};
+	const geometry::StereoRig rig = test_rig();
 	for (const bool with_depth : {false, true})
 		for (const double gap : {0.0, 45.0}) {
-			geometry::StereoRig rig;
-			rig.fx = rig.fy = 900;
-			rig.cx = 320;
-			rig.cy = 240;
-			rig.baseline_m = 0.12;
 			std::vector<MotionPoint> points;
-			for (const float x : x0)
+			const auto walker = [&](cv::Point2f from, float flow) {
 				for (int i = 0; i < 10; ++i) {
 					MotionPoint p;
-					p.px = {x + static_cast<float>(i % 2) * 8.F,
-						200.F + static_cast<float>(i / 2) * 12.F};
-					p.flow = p.residual = {3.F, 0.F};
+					p.px = {from.x + static_cast<float>(i % 2) * 8.F,
+						from.y + static_cast<float>(i / 2) * 12.F};
+					p.flow = p.residual = {flow, 0.F};
 					p.dynamic = true;
 					if (with_depth)
-						p.xyz = cv::Vec3f(static_cast<float>((p.px.x - rig.cx) * 6 / rig.fx),
-								  static_cast<float>((p.px.y - rig.cy) * 6 / rig.fy),
-								  6.F);
+						p.xyz = at_depth(p.px, 6.F, rig);
 					points.push_back(p);
 				}
-			for (int i = 0; i < 10; ++i) {
-				MotionPoint p;
-				p.px = {600.F + static_cast<float>(i % 2) * 8.F,
-					400.F + static_cast<float>(i / 2) * 12.F};
-				p.flow = p.residual = {-3.F, 0.F};
-				p.dynamic = true;
-				if (with_depth)
-					p.xyz = cv::Vec3f(static_cast<float>((p.px.x - rig.cx) * 6 / rig.fx),
-							  static_cast<float>((p.px.y - rig.cy) * 6 / rig.fy), 6.F);
-				points.push_back(p);
-			}
+			};
+			for (const float x : x0)
+				walker({x, 200.F}, 3.F);
+			walker({600.F, 400.F}, -3.F);
 			MotionPoint inside; // within the first walker's points, slower but its way
 			inside.px = {104.F, 230.F};
 			inside.flow = inside.residual = {1.8F, 0.F};
