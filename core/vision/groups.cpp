@@ -527,14 +527,16 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 	for (size_t t = 0; t < before.size(); ++t)
 		predicted_shift[t] = before[t].image_velocity_pxps * static_cast<float>(context.dt_s) *
 				     static_cast<float>(1 + before[t].missed_frames);
+	// How far from its predicted centre a track takes a cluster: a large mover's centre wanders further.
+	const auto gate_of = [&](const TrackedGroup &track) {
+		return std::max(params.association_px, 0.5 * std::hypot(track.box.width, track.box.height));
+	};
 	std::vector<Candidate> candidates;
 	for (size_t c = 0; c < clusters.size(); ++c)
 		for (size_t t = 0; t < before.size(); ++t) {
 			const cv::Point2f predicted = before[t].centre + predicted_shift[t];
 			const double d = cv::norm(clusters[c].centre - predicted);
-			const double gate = std::max(params.association_px,
-						     0.5 * std::hypot(before[t].box.width, before[t].box.height));
-			if (d <= gate)
+			if (d <= gate_of(before[t]))
 				candidates.push_back({d, c, t});
 		}
 	std::sort(candidates.begin(), candidates.end(),
@@ -569,6 +571,36 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 			}
 		}
 	}
+	// A track left without a cluster that has one within its gate, on its predicted box and moving alike, is
+	// a second track on that cluster's mover (seen in pieces, then whole; the other track took it by
+	// distance). Of the two, the one seen longer goes on with the cluster and the other ends: not published
+	// on beside it as a second group on the same mover. The gate keeps a wide cluster whose box merely
+	// spans a track's from ending it.
+	const auto lies_on = [&](const Cluster &cluster, size_t t) {
+		const cv::Rect2f predicted(before[t].box.tl() + predicted_shift[t], before[t].box.size());
+		const float smaller = std::min(predicted.area(), cluster.box.area());
+		return smaller > 0 &&
+		       cv::norm(cluster.centre - (before[t].centre + predicted_shift[t])) <= gate_of(before[t]) &&
+		       (predicted & cluster.box).area() >= 0.5F * smaller &&
+		       move_alike(cluster.residual, before[t].residual, params);
+	};
+	std::vector<uint8_t> track_ended(before.size(), 0);
+	for (size_t c = 0; c < clusters.size(); ++c)
+		for (size_t t = 0; t < before.size(); ++t) {
+			if (track_taken[t] || track_ended[t] || !lies_on(clusters[c], t))
+				continue;
+			const int holder = track_of_cluster[c];
+			if (holder >= 0 && before[t].age_frames <= before[static_cast<size_t>(holder)].age_frames) {
+				track_ended[t] = 1;
+				continue;
+			}
+			if (holder >= 0) {
+				track_taken[static_cast<size_t>(holder)] = 0;
+				track_ended[static_cast<size_t>(holder)] = 1;
+			}
+			track_of_cluster[c] = static_cast<int>(t);
+			track_taken[t] = 1;
+		}
 	const double fps = context.dt_s > 0 ? 1.0 / context.dt_s : 0;
 	for (size_t c = 0; c < clusters.size(); ++c) {
 		const Cluster &cluster = clusters[c];
@@ -631,7 +663,7 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 	// Groups not seen this frame are remembered a little while, so a short occlusion keeps the id; a
 	// published one is published on for coast_frames, where its velocities take it.
 	for (size_t t = 0; t < before.size(); ++t)
-		if (!track_taken[t] && before[t].missed_frames < params.max_missed_frames) {
+		if (!track_taken[t] && before[t].missed_frames < params.max_missed_frames && !track_ended[t]) {
 			TrackedGroup kept = before[t];
 			++kept.missed_frames;
 			out.memory.groups.push_back(kept);
