@@ -727,6 +727,15 @@ const std::vector<Option> &options()
 			"shortest residual flow (pixels per frame) that counts as strong motion",
 			[](DaemonConfig &c) -> double & { return c.motion.groups.min_flow_px; }, 0, 1000));
 		o.push_back(number(
+			"groups", "noise_sigmas",
+			"flow members: the floor min_flow_px falls, to min_flow_floor_px at the least, to this "
+			"many times the frame's residual noise where that is less (0: min_flow_px always)",
+			[](DaemonConfig &c) -> double & { return c.motion.groups.noise_sigmas; }, 0, 1000));
+		o.push_back(number(
+			"groups", "min_flow_floor_px",
+			"flow members: the lowest the noise can take the floor to, pixels per frame",
+			[](DaemonConfig &c) -> double & { return c.motion.groups.min_flow_floor_px; }, 0, 1000));
+		o.push_back(number(
 			"groups", "position_scale_px", "sample normalisation: image distance still in one group",
 			[](DaemonConfig &c) -> double & { return c.motion.groups.position_scale_px; }, 1, 10000));
 		o.push_back(number(

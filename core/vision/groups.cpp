@@ -454,10 +454,40 @@ ClusterRound cluster_round(const std::vector<uint32_t> &chosen, const std::vecto
 
 } // namespace
 
+namespace {
+
+/// A robust standard deviation of the points' residuals (the larger of u's and v's), pixels: most points are
+/// the static scene's, so this is its noise. Infinite with too few points to tell.
+double residual_noise_px(const std::vector<MotionPoint> &points)
+{
+	std::vector<float> u, v;
+	for (const auto &p : points)
+		if (std::isfinite(p.residual.x) && std::isfinite(p.residual.y)) {
+			u.push_back(p.residual.x);
+			v.push_back(p.residual.y);
+		}
+	if (u.size() < 10)
+		return std::numeric_limits<double>::infinity();
+	const auto mad = [](std::vector<float> &x) {
+		const float m = median_of(x);
+		for (float &e : x)
+			e = std::abs(e - m);
+		return 1.4826 * median_of(x);
+	};
+	return std::max(mad(u), mad(v));
+}
+
+} // namespace
+
 GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemory *previous,
-			const GroupMotionContext &context, const GroupParams &params, AffinityPropagation &workspace,
+			const GroupMotionContext &context, const GroupParams &given, AffinityPropagation &workspace,
 			const std::vector<uint32_t> *strong)
 {
+	GroupParams params = given;
+	if (strong == nullptr && params.members == GroupMembers::Flow && params.noise_sigmas > 0)
+		params.min_flow_px =
+			std::min(given.min_flow_px,
+				 std::max(given.min_flow_floor_px, given.noise_sigmas * residual_noise_px(points)));
 	GroupOutput out;
 	out.group_of_point.assign(points.size(), -1);
 	out.strong = strong != nullptr ? *strong : strong_motion(points, params);

@@ -32,6 +32,13 @@ struct GroupParams {
 	/// A point moves strongly when its residual flow (observed minus what the camera's motion predicts)
 	/// exceeds the frame's mean in u or in v (seed 002) and is at least this long, pixels per frame.
 	double min_flow_px = 1.0;
+	/// GroupMembers::Flow, feature points: the floor falls to this many times the frame's residual noise (a
+	/// robust standard deviation over all points, most of them the static scene's) where that is less than
+	/// min_flow_px, but not under min_flow_floor_px; 0: min_flow_px always. A fixed camera's residuals are
+	/// a few hundredths of a pixel (vtest: 0.04) and a slow walker far off moves under a pixel a frame; a
+	/// moving camera's parallax keeps the floor at min_flow_px.
+	double noise_sigmas = 8;
+	double min_flow_floor_px = 0.5;
 	/// Normalisation of the 6-d samples: one unit of each is "still the same group".
 	double position_scale_px = 40;
 	double flow_scale_px = 1.5;

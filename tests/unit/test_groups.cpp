@@ -471,6 +471,55 @@ TEST(Groups, ANoiseGroupSeenBrieflyDoesNotCoast)
 	}
 }
 
+TEST(Groups, ASlowMoverIsFoundWhereTheSceneIsQuiet)
+{
+	// A walker of 20 points moving 0.6 px per frame (a slow walker far off, as on a fixed camera's footage)
+	// among 300 still points whose residuals are noise. Under the fixed floor of 1 px it is not strong
+	// motion. Where the noise is 0.04 px (a fixed camera, vtest: 0.04), the floor falls to
+	// max(min_flow_floor_px, noise_sigmas x 0.04) = 0.5 px and the walker is a group; where it is 0.3 px (a
+	// moving camera's parallax) the floor stays at 1 px and nothing is a group, the noise points included.
+	for (const float sigma : {0.04F, 0.3F})
+		for (const double sigmas : {0.0, 8.0}) {
+			std::mt19937 rng(11);
+			std::normal_distribution<float> noise(0.F, sigma);
+			GroupParams params;
+			params.noise_sigmas = sigmas;
+			params.min_flow_floor_px = 0.5;
+			params.members = GroupMembers::Flow;
+			AffinityPropagation workspace;
+			GroupMemory memory;
+			const std::string label =
+				"noise " + std::to_string(sigma) + ", sigmas " + std::to_string(sigmas);
+			for (int frame = 0; frame < 3; ++frame) {
+				std::vector<MotionPoint> points(300);
+				for (size_t i = 0; i < points.size(); ++i) {
+					points[i].px = {static_cast<float>((i * 37) % 640),
+							static_cast<float>((i * 53) % 480)};
+					points[i].residual = points[i].flow = {noise(rng), noise(rng)};
+				}
+				for (int i = 0; i < 20; ++i) {
+					MotionPoint p;
+					p.px = {300.F + static_cast<float>(i % 4) * 6.F,
+						200.F + static_cast<float>(i / 4) * 10.F};
+					p.residual = p.flow = {0.6F + noise(rng), noise(rng)};
+					points.push_back(p);
+				}
+				const GroupOutput out = find_groups(points, frame == 0 ? nullptr : &memory,
+								    {0.1, {}, {}, {}}, params, workspace);
+				memory = out.memory;
+				if (frame == 0)
+					continue;
+				if (sigma < 0.1F && sigmas > 0) {
+					ASSERT_EQ(out.groups.size(), 1u) << label;
+					EXPECT_GE(out.groups[0].point_count, 18) << label;
+					EXPECT_NEAR(out.groups[0].image_velocity_pxps[0], 6.0, 1.0) << label;
+				} else {
+					EXPECT_TRUE(out.groups.empty()) << label;
+				}
+			}
+		}
+}
+
 TEST(Groups, StillSceneHasNoGroup)
 {
 	std::mt19937 rng(9);
