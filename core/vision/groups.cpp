@@ -452,10 +452,6 @@ ClusterRound cluster_round(const std::vector<uint32_t> &chosen, const std::vecto
 	return round;
 }
 
-} // namespace
-
-namespace {
-
 /// A robust standard deviation of the points' residuals (the larger of u's and v's), pixels: most points are
 /// the static scene's, so this is its noise. Infinite with too few points to tell.
 double residual_noise_px(const std::vector<MotionPoint> &points)
@@ -552,21 +548,32 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 		double distance;
 		size_t cluster, track;
 	};
-	// Where each track's image velocity takes it since it was last seen.
-	std::vector<cv::Point2f> predicted_shift(before.size());
-	for (size_t t = 0; t < before.size(); ++t)
-		predicted_shift[t] = before[t].image_velocity_pxps * static_cast<float>(context.dt_s) *
-				     static_cast<float>(1 + before[t].missed_frames);
-	// How far from its predicted centre a track takes a cluster: a large mover's centre wanders further.
-	const auto gate_of = [&](const TrackedGroup &track) {
-		return std::max(params.association_px, 0.5 * std::hypot(track.box.width, track.box.height));
+	// Where each track's image velocity takes its centre and box since it was last seen, and how far from
+	// that centre it takes a cluster (a large mover's centre wanders further).
+	struct Prediction {
+		cv::Point2f centre;
+		cv::Rect2f box;
+		double gate;
+	};
+	std::vector<Prediction> predicted(before.size());
+	for (size_t t = 0; t < before.size(); ++t) {
+		const cv::Point2f shift = before[t].image_velocity_pxps * static_cast<float>(context.dt_s) *
+					  static_cast<float>(1 + before[t].missed_frames);
+		predicted[t] = {
+			before[t].centre + shift,
+			{before[t].box.tl() + shift, before[t].box.size()},
+			std::max(params.association_px, 0.5 * std::hypot(before[t].box.width, before[t].box.height))};
+	}
+	// The share of the smaller of a track's predicted box and a cluster's box that the other covers.
+	const auto overlap_share = [&](size_t t, const Cluster &cluster) {
+		const float smaller = std::min(predicted[t].box.area(), cluster.box.area());
+		return smaller > 0 ? (predicted[t].box & cluster.box).area() / smaller : 0.F;
 	};
 	std::vector<Candidate> candidates;
 	for (size_t c = 0; c < clusters.size(); ++c)
 		for (size_t t = 0; t < before.size(); ++t) {
-			const cv::Point2f predicted = before[t].centre + predicted_shift[t];
-			const double d = cv::norm(clusters[c].centre - predicted);
-			if (d <= gate_of(before[t]))
+			const double d = cv::norm(clusters[c].centre - predicted[t].centre);
+			if (d <= predicted[t].gate)
 				candidates.push_back({d, c, t});
 		}
 	std::sort(candidates.begin(), candidates.end(),
@@ -588,12 +595,10 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 		for (size_t t = 0; t < before.size(); ++t) {
 			if (track_taken[t])
 				continue;
-			const cv::Rect2f predicted(before[t].box.tl() + predicted_shift[t], before[t].box.size());
-			const float overlap = (predicted & clusters[c].box).area();
-			const float smaller = std::min(predicted.area(), clusters[c].box.area());
-			if (smaller > 0 && overlap / smaller > best_overlap && overlap >= 0.5F * smaller &&
+			const float share = overlap_share(t, clusters[c]);
+			if (share > best_overlap && share >= 0.5F &&
 			    move_alike(clusters[c].residual, before[t].residual, params)) {
-				best_overlap = overlap / smaller;
+				best_overlap = share;
 				if (track_of_cluster[c] >= 0)
 					track_taken[static_cast<size_t>(track_of_cluster[c])] = 0;
 				track_of_cluster[c] = static_cast<int>(t);
@@ -607,12 +612,8 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 	// on beside it as a second group on the same mover. The gate keeps a wide cluster whose box merely
 	// spans a track's from ending it.
 	const auto lies_on = [&](const Cluster &cluster, size_t t) {
-		const cv::Rect2f predicted(before[t].box.tl() + predicted_shift[t], before[t].box.size());
-		const float smaller = std::min(predicted.area(), cluster.box.area());
-		return smaller > 0 &&
-		       cv::norm(cluster.centre - (before[t].centre + predicted_shift[t])) <= gate_of(before[t]) &&
-		       (predicted & cluster.box).area() >= 0.5F * smaller &&
-		       move_alike(cluster.residual, before[t].residual, params);
+		return cv::norm(cluster.centre - predicted[t].centre) <= predicted[t].gate &&
+		       overlap_share(t, cluster) >= 0.5F && move_alike(cluster.residual, before[t].residual, params);
 	};
 	std::vector<uint8_t> track_ended(before.size(), 0);
 	for (size_t c = 0; c < clusters.size(); ++c)

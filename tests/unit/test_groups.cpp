@@ -165,13 +165,13 @@ cv::Vec3f at_depth(cv::Point2f px, float z, const geometry::StereoRig &rig)
 	return {static_cast<float>((px.x - rig.cx) * z / rig.fx), static_cast<float>((px.y - rig.cy) * z / rig.fy), z};
 }
 
-/// 120 points of a still background spread over a 640x480 frame: what a pose-explained scene leaves, residuals
-/// of noise (sigma 0.2 px).
-std::vector<MotionPoint> still_background(std::mt19937 &rng)
+/// `count` points of a still background spread over a 640x480 frame: what a pose-explained scene leaves,
+/// residuals of noise (standard deviation `sigma_px`).
+std::vector<MotionPoint> still_background(std::mt19937 &rng, int count = 120, float sigma_px = 0.2F)
 {
-	std::normal_distribution<float> noise(0.f, 0.2f);
+	std::normal_distribution<float> noise(0.f, sigma_px);
 	std::vector<MotionPoint> points;
-	for (int i = 0; i < 120; ++i) {
+	for (int i = 0; i < count; ++i) {
 		MotionPoint p;
 		p.px = {static_cast<float>((i * 37) % 640), static_cast<float>((i * 53) % 480)};
 		p.residual = {noise(rng), noise(rng)};
@@ -491,12 +491,7 @@ TEST(Groups, ASlowMoverIsFoundWhereTheSceneIsQuiet)
 			const std::string label =
 				"noise " + std::to_string(sigma) + ", sigmas " + std::to_string(sigmas);
 			for (int frame = 0; frame < 3; ++frame) {
-				std::vector<MotionPoint> points(300);
-				for (size_t i = 0; i < points.size(); ++i) {
-					points[i].px = {static_cast<float>((i * 37) % 640),
-							static_cast<float>((i * 53) % 480)};
-					points[i].residual = points[i].flow = {noise(rng), noise(rng)};
-				}
+				std::vector<MotionPoint> points = still_background(rng, 300, sigma);
 				for (int i = 0; i < 20; ++i) {
 					MotionPoint p;
 					p.px = {300.F + static_cast<float>(i % 4) * 6.F,
