@@ -399,6 +399,11 @@ const std::vector<Option> &options()
 			"features", "orb_fast_threshold", "FAST corner threshold",
 			[](DaemonConfig &c) -> int & { return c.motion.features.orb_fast_threshold; }, 1, 100));
 		o.push_back(number(
+			"features", "candidates_per_feature",
+			"corners detected per point kept, before the grid shares the budget (more reach weakly "
+			"textured cells)",
+			[](DaemonConfig &c) -> int & { return c.motion.features.candidates_per_feature; }, 1, 50));
+		o.push_back(number(
 			"features", "surf_hessian_threshold", "SURF: minimum det(H) of a keypoint",
 			[](DaemonConfig &c) -> double & { return c.motion.features.surf.hessian_threshold; }, 0, 1e6));
 		o.push_back(number(
@@ -785,6 +790,13 @@ const std::vector<Option> &options()
 			"sparse flow with depth: clusters that move alike at one depth (split_same_depth) whose boxes "
 			"are at most this many metres apart are one group (0: not joined)",
 			[](DaemonConfig &c) -> double & { return c.motion.groups.merge_reach_m; }, 0, 1000));
+		o.push_back(number(
+			"groups", "merge_looming",
+			"clusters at one depth, one above the other, also move alike when their residuals differ as a "
+			"mover's coming at the camera spreads its pieces apart, by at most this share of their gap a "
+			"frame "
+			"(0: not looked at)",
+			[](DaemonConfig &c) -> double & { return c.motion.groups.merge_looming; }, 0, 1));
 		o.push_back(
 			boolean("groups", "regroup_unplaced",
 				"the points the clustering placed in no group are clustered once more among themselves",

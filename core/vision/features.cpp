@@ -95,9 +95,10 @@ FrameFeatures extract_features(const cv::Mat &image, const FeatureParams &params
 
 	FrameFeatures features;
 	if (params.detector == Detector::Orb) {
-		// Detect three times the budget, then bucket: the grid decides which survive, not raw response.
-		auto orb = cv::ORB::create(params.max_features * 3, params.orb_scale, params.orb_levels, 31, 0, 2,
-					   cv::ORB::HARRIS_SCORE, 31, params.orb_fast_threshold);
+		// Detect several times the budget, then bucket: the grid decides which survive, not raw response.
+		auto orb = cv::ORB::create(params.max_features * std::max(params.candidates_per_feature, 1),
+					   params.orb_scale, params.orb_levels, 31, 0, 2, cv::ORB::HARRIS_SCORE, 31,
+					   params.orb_fast_threshold);
 		std::vector<cv::KeyPoint> detected;
 		orb->detect(grey, detected);
 		features.keypoints = bucket_keypoints(std::move(detected), grey.size(), params.grid_cols,
@@ -107,7 +108,7 @@ FrameFeatures extract_features(const cv::Mat &image, const FeatureParams &params
 	} else {
 		const cv::Mat integral = surf_integral(grey);
 		SurfParams surf = params.surf;
-		surf.max_features = params.max_features * 3;
+		surf.max_features = params.max_features * std::max(params.candidates_per_feature, 1);
 		const std::vector<SurfKeypoint> detected = surf_detect(integral, surf);
 		std::vector<cv::KeyPoint> candidates;
 		candidates.reserve(detected.size());

@@ -23,6 +23,10 @@ struct FeatureParams {
 	int orb_levels = 4;	 ///< pyramid levels (OpenCV's default 8 costs twice as much for little gain here)
 	float orb_scale = 1.2F;
 	int orb_fast_threshold = 12;
+	/// Candidates detected per kept point before bucketing. The detector keeps its strongest candidates
+	/// over the whole image, so with few of them a weakly textured region (a plain coat filling a grid
+	/// cell) has none left for its cell to keep, however the grid shares the budget.
+	int candidates_per_feature = 3;
 	SurfParams surf; ///< when detector is Surf (max_features above still applies)
 };
 

@@ -145,14 +145,34 @@ bool move_alike(cv::Point2f a, cv::Point2f b, const GroupParams &params)
 	return cv::norm(a - b) <= std::max(params.member_tolerance_px, 0.5 * strength);
 }
 
-cv::Point2f median_residual(const std::vector<uint32_t> &members, const std::vector<MotionPoint> &points)
+/// move_alike, allowing for one mover's image spreading out or drawing in (GroupParams::merge_looming):
+/// the residuals of its pieces at `pa` and `pb` (at one depth) differ by k (pa - pb) for a scale k the
+/// bound allows, and by what move_alike allows beyond that.
+bool move_alike_looming(cv::Point2f ra, cv::Point2f rb, cv::Point2f pa, cv::Point2f pb, const GroupParams &params)
 {
-	std::vector<float> ru, rv;
+	if (move_alike(ra, rb, params))
+		return true;
+	const cv::Point2f gap = pa - pb, differ = ra - rb;
+	// Only pieces above one another: movers stand on the ground, so two at one depth are side by side,
+	// and there spreading out cannot be told from two movers going apart.
+	if (params.merge_looming <= 0 || std::abs(gap.y) < std::max(std::abs(gap.x), 1.0F))
+		return false;
+	const double k = std::clamp(static_cast<double>(differ.y) / gap.y, -params.merge_looming, params.merge_looming);
+	const cv::Point2f left = differ - static_cast<float>(k) * gap;
+	const double strength = std::max(cv::norm(ra), cv::norm(rb));
+	return cv::norm(left) <= std::max(params.member_tolerance_px, 0.5 * strength);
+}
+
+/// The median, axis by axis, of one of the members' points: their residuals or their positions.
+cv::Point2f median_point(const std::vector<uint32_t> &members, const std::vector<MotionPoint> &points,
+			 cv::Point2f MotionPoint::*which)
+{
+	std::vector<float> u, v;
 	for (const uint32_t i : members) {
-		ru.push_back(points[i].residual.x);
-		rv.push_back(points[i].residual.y);
+		u.push_back((points[i].*which).x);
+		v.push_back((points[i].*which).y);
 	}
-	return {median_of(ru), median_of(rv)};
+	return {median_of(u), median_of(v)};
 }
 
 /// The share of its box a cluster of grid cells covers (each member stands for member_area_px2).
@@ -243,15 +263,17 @@ void merge_alike(std::vector<std::vector<uint32_t>> &clusters, const std::vector
 	const bool cells = params.member_area_px2 > 0;
 	const bool with_depth = params.split_same_depth > 0 && (cells || (params.merge_reach_m > 0 && fx > 0));
 	std::vector<cv::Rect2f> extents;
-	std::vector<cv::Point2f> motion;
+	std::vector<cv::Point2f> motion, centre;
 	std::vector<std::optional<float>> depth;
 	const auto measure_cluster = [&](size_t c) {
 		extents[c] = extent_of(clusters[c], points);
-		motion[c] = median_residual(clusters[c], points);
+		motion[c] = median_point(clusters[c], points, &MotionPoint::residual);
+		centre[c] = median_point(clusters[c], points, &MotionPoint::px);
 		depth[c] = with_depth ? median_depth(clusters[c], points) : std::nullopt;
 	};
 	extents.resize(clusters.size());
 	motion.resize(clusters.size());
+	centre.resize(clusters.size());
 	depth.resize(clusters.size());
 	for (size_t c = 0; c < clusters.size(); ++c)
 		measure_cluster(c);
@@ -264,14 +286,18 @@ void merge_alike(std::vector<std::vector<uint32_t>> &clusters, const std::vector
 		merged = false;
 		for (size_t a = 0; a < clusters.size() && !merged; ++a)
 			for (size_t b = a + 1; b < clusters.size() && !merged; ++b) {
-				if (!move_alike(motion[a], motion[b], params))
+				const bool same_depth =
+					depth[a] && depth[b] &&
+					std::abs(*depth[a] - *depth[b]) <=
+						params.split_same_depth * std::min(*depth[a], *depth[b]);
+				// At one depth the pieces may be one mover's spreading out as it comes closer.
+				if (same_depth ? !move_alike_looming(motion[a], motion[b], centre[a], centre[b], params)
+					       : !move_alike(motion[a], motion[b], params))
 					continue;
 				const double touch = params.box_margin_px + 0.5 * params.merge_gap_px;
 				bool join = params.merge_gap_px >= 0 &&
 					    (grown(extents[a], touch) & grown(extents[b], touch)).area() > 0;
-				if (!join && depth[a] && depth[b] &&
-				    std::abs(*depth[a] - *depth[b]) <=
-					    params.split_same_depth * std::min(*depth[a], *depth[b])) {
+				if (!join && same_depth) {
 					// How far apart the pieces may lie: the grid's, the larger piece's longer side
 					// (stop 29); the feature points', merge_reach_m at the nearer depth.
 					const double reach =
@@ -288,6 +314,7 @@ void merge_alike(std::vector<std::vector<uint32_t>> &clusters, const std::vector
 					clusters.erase(clusters.begin() + at);
 					extents.erase(extents.begin() + at);
 					motion.erase(motion.begin() + at);
+					centre.erase(centre.begin() + at);
 					depth.erase(depth.begin() + at);
 					measure_cluster(a);
 					merged = true;
@@ -424,7 +451,7 @@ ClusterRound cluster_round(const std::vector<uint32_t> &chosen, const std::vecto
 		// Members that do not move like the cluster's median (a flow that bled onto the background around
 		// a mover, a stray point the clustering took along) leave it, by the rule points join a group by
 		// (join_groups), so that the box and the velocities are the movers'.
-		const cv::Point2f median = median_residual(members, points);
+		const cv::Point2f median = median_point(members, points, &MotionPoint::residual);
 		const auto leaves = std::stable_partition(members.begin(), members.end(), [&](uint32_t i) {
 			return moves_with(points[i].residual, median, params.member_tolerance_px);
 		});
