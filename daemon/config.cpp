@@ -852,8 +852,13 @@ const std::vector<Option> &options()
 			[](DaemonConfig &c) -> double & { return c.motion.groups.label_tolerance_px; }, 0, 1000));
 		o.push_back(number(
 			"groups", "member_tolerance_px",
-			"groups: residual difference to a cluster's for a member, or between clusters that move alike",
+			"lk / dis: residual difference to a cluster's for a grid cell member, or between clusters that "
+			"move alike",
 			[](DaemonConfig &c) -> double & { return c.motion.groups.member_tolerance_px; }, 0, 1000));
+		o.push_back(number(
+			"groups", "point_tolerance_px",
+			"sparse: the same for feature points (their positions are quantised to their pyramid level)",
+			[](DaemonConfig &c) -> double & { return c.motion.groups.point_tolerance_px; }, 0, 1000));
 
 		// [prior]: seed 001's person prior (core/vision/person_prior.hpp)
 		o.push_back(boolean("prior", "enabled",

@@ -128,8 +128,14 @@ TargetGroup coasted(const TrackedGroup &track, double dt_s)
 	return g;
 }
 
+/// The groups' own tolerance: the dense flow's cells' or the feature points' (GroupParams).
+double member_tolerance(const GroupParams &params)
+{
+	return params.member_area_px2 > 0 ? params.member_tolerance_px : params.point_tolerance_px;
+}
+
 /// The rule a point's residual r moves with a group's g by (join_groups, with label_tolerance_px; a cluster's
-/// members, with member_tolerance_px): |r - g| <= max(tolerance, |g| / 2)
+/// members, with member_tolerance): |r - g| <= max(tolerance, |g| / 2)
 /// and |r - g| < |r|, nearer the group's motion than standing still. NaN residuals never do.
 bool moves_with(cv::Point2f r, cv::Point2f g, double tolerance_px)
 {
@@ -142,7 +148,7 @@ bool moves_with(cv::Point2f r, cv::Point2f g, double tolerance_px)
 bool move_alike(cv::Point2f a, cv::Point2f b, const GroupParams &params)
 {
 	const double strength = std::max(cv::norm(a), cv::norm(b));
-	return cv::norm(a - b) <= std::max(params.member_tolerance_px, 0.5 * strength);
+	return cv::norm(a - b) <= std::max(member_tolerance(params), 0.5 * strength);
 }
 
 /// move_alike, allowing for one mover's image spreading out or drawing in (GroupParams::merge_looming):
@@ -160,7 +166,7 @@ bool move_alike_looming(cv::Point2f ra, cv::Point2f rb, cv::Point2f pa, cv::Poin
 	const double k = std::clamp(static_cast<double>(differ.y) / gap.y, -params.merge_looming, params.merge_looming);
 	const cv::Point2f left = differ - static_cast<float>(k) * gap;
 	const double strength = std::max(cv::norm(ra), cv::norm(rb));
-	return cv::norm(left) <= std::max(params.member_tolerance_px, 0.5 * strength);
+	return cv::norm(left) <= std::max(member_tolerance(params), 0.5 * strength);
 }
 
 /// The median, axis by axis, of one of the members' points: their residuals or their positions.
@@ -453,7 +459,7 @@ ClusterRound cluster_round(const std::vector<uint32_t> &chosen, const std::vecto
 		// (join_groups), so that the box and the velocities are the movers'.
 		const cv::Point2f median = median_point(members, points, &MotionPoint::residual);
 		const auto leaves = std::stable_partition(members.begin(), members.end(), [&](uint32_t i) {
-			return moves_with(points[i].residual, median, params.member_tolerance_px);
+			return moves_with(points[i].residual, median, member_tolerance(params));
 		});
 		if (unplaced != nullptr)
 			unplaced->insert(unplaced->end(), leaves, members.end());

@@ -69,9 +69,11 @@ struct GroupParams {
 	bool label_points = true;
 	double label_tolerance_px = 2.0;
 	/// The same rule for the groups themselves: which members move like their cluster's median, and which
-	/// clusters and tracks move alike. Tighter than the labels' (at 2 px patches of flow noise under pure
-	/// rotation join into groups).
+	/// clusters and tracks move alike. For the dense flow's grid cells (member_area_px2 > 0) tighter than
+	/// the labels' (at 2 px patches of flow noise under pure rotation join into groups); for feature points
+	/// `point_tolerance_px`, the labels' 2 px for the labels' reason (docs/groups.md, stop 44).
 	double member_tolerance_px = 1.0;
+	double point_tolerance_px = 2.0;
 	/// Added around the members' extent to make a group's box. Feature points are corners inside a mover's
 	/// outline, so the body reaches beyond them (the default; points join by label_points inside the
 	/// members' extent only). The pipeline sets half a cell when the members are the dense flow's grid

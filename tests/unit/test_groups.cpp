@@ -524,6 +524,40 @@ TEST(Groups, ASlowMoverIsFoundWhereTheSceneIsQuiet)
 		}
 }
 
+TEST(Groups, AWalkersFeaturePointsOffByAPyramidStepStayInItsGroup)
+{
+	// A slow walker of 20 feature points moving 1.2 px a frame, as keypoints report it: positions quantised
+	// to their pyramid level, so every other point's residual is 1.5 px off the walker's (a quarter ahead,
+	// a quarter behind, the latter under the strong-motion floor and out of the clustering). With the
+	// feature points' tolerance (2 px) the walker is one group of its 15 strong points. At 1 px, the dense
+	// cells' tolerance, the points ahead leave their cluster and come out as a group of their own.
+	for (const double tolerance : {2.0, 1.0}) {
+		std::mt19937 rng(3);
+		GroupParams params;
+		params.point_tolerance_px = tolerance;
+		params.members = GroupMembers::Flow;
+		AffinityPropagation workspace;
+		GroupMemory memory;
+		GroupOutput out;
+		for (int frame = 0; frame < 3; ++frame) {
+			std::vector<MotionPoint> points = still_background(rng, 200, 0.1F);
+			for (int i = 0; i < 20; ++i) {
+				MotionPoint p;
+				p.px = {300.F + static_cast<float>(i % 4) * 6.F,
+					200.F + static_cast<float>(i / 4) * 10.F};
+				const float off = i % 4 == 1 ? 1.5F : i % 4 == 3 ? -1.5F : 0.F;
+				p.residual = p.flow = {1.2F + off, 0.F};
+				points.push_back(p);
+			}
+			out = find_groups(points, frame == 0 ? nullptr : &memory, {0.1, {}, {}, {}}, params, workspace);
+			memory = out.memory;
+		}
+		const bool whole = out.groups.size() == 1 && out.groups[0].point_count == 15;
+		EXPECT_EQ(whole, tolerance > 1.5)
+			<< "tolerance " << tolerance << ": " << out.groups.size() << " groups";
+	}
+}
+
 TEST(Groups, StillSceneHasNoGroup)
 {
 	std::mt19937 rng(9);
