@@ -794,8 +794,7 @@ const std::vector<Option> &options()
 			"groups", "merge_looming",
 			"clusters at one depth, one above the other, also move alike when their residuals differ as a "
 			"mover's coming at the camera spreads its pieces apart, by at most this share of their gap a "
-			"frame "
-			"(0: not looked at)",
+			"frame (0: not looked at)",
 			[](DaemonConfig &c) -> double & { return c.motion.groups.merge_looming; }, 0, 1));
 		o.push_back(
 			boolean("groups", "regroup_unplaced",

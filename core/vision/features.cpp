@@ -94,11 +94,11 @@ FrameFeatures extract_features(const cv::Mat &image, const FeatureParams &params
 		grey = image;
 
 	FrameFeatures features;
+	// Detect several times the budget, then bucket: the grid decides which survive, not raw response.
+	const int detected_at_most = params.max_features * std::max(params.candidates_per_feature, 1);
 	if (params.detector == Detector::Orb) {
-		// Detect several times the budget, then bucket: the grid decides which survive, not raw response.
-		auto orb = cv::ORB::create(params.max_features * std::max(params.candidates_per_feature, 1),
-					   params.orb_scale, params.orb_levels, 31, 0, 2, cv::ORB::HARRIS_SCORE, 31,
-					   params.orb_fast_threshold);
+		auto orb = cv::ORB::create(detected_at_most, params.orb_scale, params.orb_levels, 31, 0, 2,
+					   cv::ORB::HARRIS_SCORE, 31, params.orb_fast_threshold);
 		std::vector<cv::KeyPoint> detected;
 		orb->detect(grey, detected);
 		features.keypoints = bucket_keypoints(std::move(detected), grey.size(), params.grid_cols,
@@ -108,7 +108,7 @@ FrameFeatures extract_features(const cv::Mat &image, const FeatureParams &params
 	} else {
 		const cv::Mat integral = surf_integral(grey);
 		SurfParams surf = params.surf;
-		surf.max_features = params.max_features * std::max(params.candidates_per_feature, 1);
+		surf.max_features = detected_at_most;
 		const std::vector<SurfKeypoint> detected = surf_detect(integral, surf);
 		std::vector<cv::KeyPoint> candidates;
 		candidates.reserve(detected.size());

@@ -143,12 +143,18 @@ bool moves_with(cv::Point2f r, cv::Point2f g, double tolerance_px)
 	return off <= std::max(tolerance_px, 0.5 * cv::norm(g)) && off < cv::norm(r);
 }
 
+/// The join rule's bound on what is left of two motions' difference: max(tolerance, half the stronger).
+bool differ_alike(cv::Point2f left, cv::Point2f a, cv::Point2f b, const GroupParams &params)
+{
+	const double strength = std::max(cv::norm(a), cv::norm(b));
+	return cv::norm(left) <= std::max(member_tolerance(params), 0.5 * strength);
+}
+
 /// The rule two motions a and b (clusters' or tracks' median residuals) are alike by: |a - b| <=
 /// max(tolerance, half the stronger), the join rule without a side taken.
 bool move_alike(cv::Point2f a, cv::Point2f b, const GroupParams &params)
 {
-	const double strength = std::max(cv::norm(a), cv::norm(b));
-	return cv::norm(a - b) <= std::max(member_tolerance(params), 0.5 * strength);
+	return differ_alike(a - b, a, b, params);
 }
 
 /// move_alike, allowing for one mover's image spreading out or drawing in (GroupParams::merge_looming):
@@ -164,9 +170,7 @@ bool move_alike_looming(cv::Point2f ra, cv::Point2f rb, cv::Point2f pa, cv::Poin
 	if (params.merge_looming <= 0 || std::abs(gap.y) < std::max(std::abs(gap.x), 1.0F))
 		return false;
 	const double k = std::clamp(static_cast<double>(differ.y) / gap.y, -params.merge_looming, params.merge_looming);
-	const cv::Point2f left = differ - static_cast<float>(k) * gap;
-	const double strength = std::max(cv::norm(ra), cv::norm(rb));
-	return cv::norm(left) <= std::max(member_tolerance(params), 0.5 * strength);
+	return differ_alike(differ - static_cast<float>(k) * gap, ra, rb, params);
 }
 
 /// The median, axis by axis, of one of the members' points: their residuals or their positions.
@@ -187,6 +191,12 @@ double box_fill(const std::vector<uint32_t> &members, const std::vector<MotionPo
 	const cv::Rect2f e = extent_of(members, points);
 	const double side = std::sqrt(params.member_area_px2); // the box around the cells' centres
 	return static_cast<double>(members.size()) * params.member_area_px2 / ((e.width + side) * (e.height + side));
+}
+
+/// Whether two depths are one, within `ratio` of the nearer (GroupParams::split_same_depth).
+bool at_one_depth(float za, float zb, double ratio)
+{
+	return std::abs(za - zb) <= ratio * std::min(za, zb);
 }
 
 /// A cluster of grid cells cut into its connected regions: cells (at their positions in this frame, `step`
@@ -225,8 +235,7 @@ std::vector<std::vector<uint32_t>> connected_parts(const std::vector<uint32_t> &
 				region_depth.emplace_back(static_cast<uint32_t>(r), median_of(depths[r]));
 		for (size_t a = 0; a < region_depth.size(); ++a)
 			for (size_t b = a + 1; b < region_depth.size(); ++b) {
-				const float za = region_depth[a].second, zb = region_depth[b].second;
-				if (std::abs(za - zb) <= same_depth_ratio * std::min(za, zb))
+				if (at_one_depth(region_depth[a].second, region_depth[b].second, same_depth_ratio))
 					parent[root(region_depth[a].first)] = root(region_depth[b].first);
 			}
 	}
@@ -292,10 +301,8 @@ void merge_alike(std::vector<std::vector<uint32_t>> &clusters, const std::vector
 		merged = false;
 		for (size_t a = 0; a < clusters.size() && !merged; ++a)
 			for (size_t b = a + 1; b < clusters.size() && !merged; ++b) {
-				const bool same_depth =
-					depth[a] && depth[b] &&
-					std::abs(*depth[a] - *depth[b]) <=
-						params.split_same_depth * std::min(*depth[a], *depth[b]);
+				const bool same_depth = depth[a] && depth[b] &&
+							at_one_depth(*depth[a], *depth[b], params.split_same_depth);
 				// At one depth the pieces may be one mover's spreading out as it comes closer.
 				if (same_depth ? !move_alike_looming(motion[a], motion[b], centre[a], centre[b], params)
 					       : !move_alike(motion[a], motion[b], params))
