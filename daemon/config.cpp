@@ -801,6 +801,12 @@ const std::vector<Option> &options()
 				"the points the clustering placed in no group are clustered once more among themselves",
 				[](DaemonConfig &c) -> bool & { return c.motion.groups.regroup_unplaced; }));
 		o.push_back(number(
+			"groups", "regroup_preference_scale",
+			"the second round's Affinity Propagation preference = this x the first round's (1: "
+			"the same; smaller: more clusters among the leftovers)",
+			[](DaemonConfig &c) -> double & { return c.motion.groups.regroup_preference_scale; }, 0.01,
+			100));
+		o.push_back(number(
 			"groups", "neighbours", "Affinity Propagation: messages to this many nearest samples",
 			[](DaemonConfig &c) -> int & { return c.motion.groups.affinity.neighbours; }, 1, 10000));
 		o.push_back(boolean(

@@ -56,6 +56,7 @@ std::vector<TrueMover> visible_movers(const cv::Mat &mask, const nlohmann::json 
 		const auto v = object.at("velocity_mps").get<std::array<double, 3>>();
 		m.position_m = {p[0], p[1], p[2]};
 		m.world_velocity_mps = r_wc * cv::Vec3d(v[0], v[1], v[2]);
+		m.walking = cv::norm(m.world_velocity_mps) > 0;
 		movers.push_back(m);
 	}
 	return movers;
@@ -72,7 +73,58 @@ cv::Rect pixel_box(const TargetGroup &g, const cv::Mat &mask)
 	       cv::Rect(0, 0, mask.cols, mask.rows);
 }
 
+/// Each mask id's bounding box (empty where the id does not occur).
+std::array<cv::Rect, 256> blob_boxes(const cv::Mat &mask)
+{
+	std::array<cv::Rect, 256> boxes{};
+	for (int y = 0; y < mask.rows; ++y) {
+		const auto *row = mask.ptr<uint8_t>(y);
+		for (int x = 0; x < mask.cols; ++x)
+			if (row[x] != 0)
+				boxes[row[x]] = boxes[row[x]].empty() ? cv::Rect(x, y, 1, 1)
+								      : boxes[row[x]] | cv::Rect(x, y, 1, 1);
+	}
+	return boxes;
+}
+
+/// How far the blob that overlaps mover `id` of `mask` most in `other` lies from it: box centres across,
+/// bottoms down; nullopt when no blob of `other` overlaps it.
+std::optional<double> partner_shift(const cv::Mat &mask, int id, const cv::Rect &box, const cv::Mat &other,
+				    const std::array<cv::Rect, 256> &other_boxes)
+{
+	if (other.empty() || other.size() != mask.size())
+		return std::nullopt;
+	std::array<int, 256> overlap{};
+	for (int y = box.y; y < box.y + box.height; ++y) {
+		const auto *row = mask.ptr<uint8_t>(y);
+		const auto *there = other.ptr<uint8_t>(y);
+		for (int x = box.x; x < box.x + box.width; ++x)
+			if (row[x] == id && there[x] != 0)
+				++overlap[there[x]];
+	}
+	const auto best = std::max_element(overlap.begin() + 1, overlap.end());
+	if (*best == 0)
+		return std::nullopt;
+	const cv::Rect &b = other_boxes[static_cast<size_t>(best - overlap.begin())];
+	return std::hypot((b.x + 0.5 * b.width) - (box.x + 0.5 * box.width),
+			  static_cast<double>((b.y + b.height) - (box.y + box.height)));
+}
+
 } // namespace
+
+void mark_walking(std::vector<TrueMover> &movers, const cv::Mat &mask, const cv::Mat &before, const cv::Mat &after,
+		  double min_move_px)
+{
+	const auto before_boxes = blob_boxes(before), after_boxes = blob_boxes(after);
+	for (auto &mover : movers) {
+		if (mover.metric)
+			continue;
+		const auto earlier = partner_shift(mask, mover.id, mover.box, before, before_boxes);
+		const auto later = partner_shift(mask, mover.id, mover.box, after, after_boxes);
+		mover.walking = (!earlier && !later) || (earlier && *earlier >= min_move_px) ||
+				(later && *later >= min_move_px);
+	}
+}
 
 std::vector<int> match_groups(const std::vector<TargetGroup> &groups, const cv::Mat &mask, double min_share)
 {
@@ -165,11 +217,13 @@ void GroupScore::add(const FrameResult &result, const cv::Mat &mask, const std::
 		for (size_t i = 0; i < gs.size(); ++i)
 			if (on[i] == mover.id && (best == nullptr || gs[i].point_count > best->point_count))
 				best = &gs[i];
+		walking_views += mover.walking ? 1 : 0;
 		if (best == nullptr) {
 			movers_untouched += touched ? 0 : 1;
 			continue;
 		}
 		++movers_covered;
+		walking_covered += mover.walking ? 1 : 0;
 		if (!mover.metric)
 			continue;
 		if (const auto it = last_group_of_mover.find(mover.id);
@@ -214,8 +268,9 @@ std::string group_score_table(const std::string &name, const GroupScore &s)
 	out << "| scene | frames | separated frames | count exact | groups | on a mover | groups with no mover in view "
 	       "| "
 	       "mover views covered | inside a group box | untouched | centroid error m (median) | speed error "
-	       "(median) | speed within 10% | heading error deg (median) | heading within 15 deg | id switches |\n";
-	out << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+	       "(median) | speed within 10% | heading error deg (median) | heading within 15 deg | id switches | "
+	       "walking views | walking covered |\n";
+	out << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
 	out << "| " << name << " | " << s.frames << " | " << s.frames_separated << " | "
 	    << ratio(s.count_exact, s.frames_separated) << " | " << s.groups << " | "
 	    << ratio(s.groups_on_movers, s.groups) << " | " << s.groups_without_movers << " | "
@@ -223,7 +278,8 @@ std::string group_score_table(const std::string &name, const GroupScore &s)
 	    << ratio(s.movers_untouched, s.mover_views) << " | " << median(s.centroid_error_m) << " | "
 	    << median(s.speed_relative_error) << " | " << fraction_below(s.speed_relative_error, 0.10) << " | "
 	    << std::setprecision(1) << median(s.heading_error_deg) << " | " << std::setprecision(3)
-	    << fraction_below(s.heading_error_deg, 15.0) << " | " << s.id_switches << " |\n";
+	    << fraction_below(s.heading_error_deg, 15.0) << " | " << s.id_switches << " | " << s.walking_views << " | "
+	    << ratio(s.walking_covered, s.walking_views) << " |\n";
 	return out.str();
 }
 

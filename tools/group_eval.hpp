@@ -28,11 +28,22 @@ struct TrueMover {
 	/// False for a mover known only by its pixels (a reference without 3D truth, `stereoctl reference`): it
 	/// scores counts and coverage, not position, speed, heading or id switches (its ids are per frame).
 	bool metric = true;
+	/// Whether it walks in this frame (issue 16: "in at least 90 % of the frames where they walk"). A
+	/// metric mover walks when its truth says it moves; a pixels-only one as mark_walking() finds.
+	bool walking = true;
 };
 
 /// One truth.ndjson line's objects that show at least `min_pixels` pixels in `mask` (ids as in the mask).
 /// A line without "objects" (a pixels-only reference) makes every mask id with enough pixels a mover.
 std::vector<TrueMover> visible_movers(const cv::Mat &mask, const nlohmann::json &truth, int min_pixels);
+
+/// A pixels-only reference (`stereoctl reference`) takes in everyone who differs from the empty scene,
+/// people standing still too. A mover in `mask` walks unless the blob that overlaps it most in `before` and
+/// in `after` (the reference's masks some frames earlier and later; empty: not there) has moved less than
+/// `min_move_px` in both: its box's centre across and its bottom (the feet) down. A mover with no such blob
+/// in either walks (it entered, left, or merged: unknown, so it counts). Metric movers are left as they are.
+void mark_walking(std::vector<TrueMover> &movers, const cv::Mat &mask, const cv::Mat &before, const cv::Mat &after,
+		  double min_move_px);
 
 /// For each group, the mover it covers: the mover id holding the most mask pixels inside the group's box,
 /// when that is at least `min_share` of the box; 0 when the box lies mostly on the static scene.
@@ -63,6 +74,8 @@ struct GroupScore {
 	/// Of the mover views not covered, those no group box touches at all (the rest: a box reaches them but
 	/// is another mover's, or holds too little of them).
 	uint64_t movers_untouched = 0;
+	/// The mover views where the mover walks (TrueMover::walking), and of those the ones covered.
+	uint64_t walking_views = 0, walking_covered = 0;
 	std::vector<double> centroid_error_m;
 	std::vector<double> speed_relative_error;
 	std::vector<double> heading_error_deg; ///< movers within max_heading_distance_m, moving

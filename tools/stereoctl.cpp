@@ -188,8 +188,15 @@ cv::Mat load_mask(const fs::path &dir, uint64_t seq)
 }
 
 /// Moving-target groups against the truth's movers (tools/group_eval.hpp).
+/// Which movers of a pixels-only reference walk (tools::mark_walking): against its masks `frames` before and
+/// after, a move of at least `min_move_px`.
+struct WalkingRule {
+	int frames = 5;
+	double min_move_px = 5;
+};
+
 int eval_groups(const std::string &results_path, const std::string &truth_dir, const std::string &name, bool json_out,
-		bool count_detail)
+		bool count_detail, const WalkingRule &walking)
 {
 	std::map<uint64_t, nlohmann::json> truth_lines;
 	{
@@ -210,12 +217,26 @@ int eval_groups(const std::string &results_path, const std::string &truth_dir, c
 	// A mover counts as in view from 400 pixels on (a person 20 x 20 px): smaller ones carry too few
 	// features to be grouped at all.
 	constexpr int kMinPixels = 400;
+	// Each mask is read once, though it is looked at from the frames before and after it too.
+	std::map<uint64_t, cv::Mat> masks;
+	const auto mask_at = [&](uint64_t seq) -> const cv::Mat & {
+		auto it = masks.find(seq);
+		if (it == masks.end())
+			it = masks.emplace(seq, load_mask(truth_dir, seq)).first;
+		return it->second;
+	};
+	const auto span = static_cast<uint64_t>(std::max(walking.frames, 0));
 	for (const auto &[seq, result] : tools::read_results(results_path)) {
 		const auto truth = truth_lines.find(seq);
-		const cv::Mat mask = load_mask(truth_dir, seq);
+		const cv::Mat mask = mask_at(seq);
 		if (truth == truth_lines.end() || mask.empty())
 			continue;
-		score.add(result, mask, tools::visible_movers(mask, truth->second, kMinPixels));
+		std::vector<tools::TrueMover> movers = tools::visible_movers(mask, truth->second, kMinPixels);
+		if (span > 0)
+			tools::mark_walking(movers, mask, seq >= span ? mask_at(seq - span) : cv::Mat(),
+					    mask_at(seq + span), walking.min_move_px);
+		score.add(result, mask, movers);
+		std::erase_if(masks, [&](const auto &entry) { return entry.first + span < seq; });
 	}
 	if (score.frames == 0) {
 		std::cerr << "stereoctl eval --groups: no frame of " << results_path << " has truth in " << truth_dir
@@ -244,6 +265,8 @@ int eval_groups(const std::string &results_path, const std::string &truth_dir, c
 					    {"heading_within_15_deg",
 					     tools::fraction_below(score.heading_error_deg, 15)},
 					    {"id_switches", score.id_switches},
+					    {"walking_views", score.walking_views},
+					    {"walking_covered", ratio(score.walking_covered, score.walking_views)},
 					    {"count_too_many", ratio(score.count_over, score.frames_separated)},
 					    {"count_too_few", ratio(score.count_under, score.frames_separated)},
 					    {"movers_split",
@@ -644,6 +667,13 @@ int main(int argc, char **argv)
 	eval_cmd->add_flag("--per-mover", eval_per_mover, "also a table of labels per mover (mask id)");
 	eval_cmd->add_flag("--groups", eval_groups_only,
 			   "score the moving-target groups against the truth's movers instead of the labels");
+	WalkingRule eval_walking;
+	eval_cmd->add_option("--walk-frames", eval_walking.frames,
+			     "with --groups and a pixels-only reference: a mover walks when its blob moved against the "
+			     "masks this many frames before or after (0: every mover walks)")
+		->capture_default_str();
+	eval_cmd->add_option("--walk-px", eval_walking.min_move_px, "... by at least this many pixels")
+		->capture_default_str();
 	eval_cmd->add_flag("--count-detail", eval_count_detail,
 			   "with --groups: a second table of how the count goes wrong in the separated frames (too "
 			   "many / too few groups, movers split or missed, groups on no mover)");
@@ -696,7 +726,8 @@ int main(int argc, char **argv)
 			}
 			int rc = 0;
 			if (!eval_truth.empty() && eval_groups_only)
-				return eval_groups(eval_results, eval_truth, eval_name, eval_json, eval_count_detail);
+				return eval_groups(eval_results, eval_truth, eval_name, eval_json, eval_count_detail,
+						   eval_walking);
 			if (!eval_truth.empty())
 				rc = eval(eval_results, eval_truth, eval_name, eval_border, eval_coverage, eval_csv,
 					  eval_json, eval_per_mover, eval_errors_csv);

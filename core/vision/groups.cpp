@@ -547,12 +547,15 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 		out.clustering_ms = first.clustering_ms;
 		// The points the first round placed in no group cluster once more among themselves: a small mover
 		// (a few points) beside a large one is among the large one's nearest samples, so Affinity
-		// Propagation hands it the large one's exemplar, and the member rule then takes it out again. At
-		// the first round's preference: the seed's, from the farthest pair among these points alone, would
-		// cut a lone small mover into pieces under min_points.
+		// Propagation hands it the large one's exemplar, and the member rule then takes it out again. At a
+		// share (regroup_preference_scale) of the first round's preference: these are several movers'
+		// leftovers, which the first round's (from the farthest pair in the frame) hands one exemplar, so that
+		// the member rule keeps only one mover's; the seed's rule on these points alone (their own farthest
+		// pair) would swing with how they happen to lie, and cut a lone small mover into pieces under
+		// min_points.
 		if (unplaced.size() >= min_group_points(params)) {
 			AffinityParams again = params.affinity;
-			again.preference = first.preference;
+			again.preference = first.preference * params.regroup_preference_scale;
 			const ClusterRound second =
 				cluster_round(unplaced, points, context, params, again, workspace, kept, nullptr);
 			out.ap_iterations += second.iterations;

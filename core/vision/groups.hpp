@@ -106,8 +106,13 @@ struct GroupParams {
 	/// a walker closing at 1.5 m/s 1.7 m away at 30 fps); 0: not looked at.
 	double merge_looming = 0.03;
 	/// The points the clustering placed in no group (in a cluster under min_points, or taken out of theirs
-	/// by the member rule) are clustered once more among themselves.
+	/// by the member rule) are clustered once more among themselves, at this times the first round's
+	/// preference. Those points are the leftovers of several movers scattered over the frame; at the first
+	/// round's preference (its farthest pair's, over the whole frame) Affinity Propagation hands most of them
+	/// one exemplar and the member rule then keeps only one mover's (docs/groups.md, stop 45: vtest covered
+	/// 0.828 -> 0.853); 1: the first round's.
 	bool regroup_unplaced = true;
+	double regroup_preference_scale = 0.25;
 };
 
 /// One temporally matched point as the grouping sees it.

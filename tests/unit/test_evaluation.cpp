@@ -313,6 +313,44 @@ TEST(GroupEvaluation, PixelsOnlyReferenceScoresCountsAndCoverage)
 	EXPECT_EQ(score.separated_groups_off, 0U);
 }
 
+// A pixels-only reference takes in people standing still; the acceptance counts the frames where they walk.
+// mark_walking compares each blob with the blob overlapping it most some frames before and after.
+TEST(GroupEvaluation, WalkingMoversFromTheReferencesOwnMasks)
+{
+	cv::Mat mask(240, 480, CV_8UC1, cv::Scalar(0)), before = mask.clone(), after = mask.clone();
+	mask(cv::Rect(100, 50, 40, 100)).setTo(1);  // walks right: 12 px earlier, 12 px later
+	before(cv::Rect(88, 50, 40, 100)).setTo(2); // (ids are per frame: not the same numbers)
+	after(cv::Rect(112, 50, 40, 100)).setTo(1);
+	mask(cv::Rect(300, 60, 40, 100)).setTo(2); // stands: 1 px earlier, 2 px later
+	before(cv::Rect(300, 61, 40, 100)).setTo(1);
+	after(cv::Rect(302, 60, 40, 100)).setTo(3);
+	mask(cv::Rect(400, 100, 30, 100)).setTo(3); // only in this frame: unknown, so it counts as walking
+	auto movers = tools::visible_movers(mask, nlohmann::json::parse(R"({"seq":4})"), 400);
+	ASSERT_EQ(movers.size(), 3U);
+	tools::mark_walking(movers, mask, before, after, 5);
+	EXPECT_TRUE(movers[0].walking);
+	EXPECT_FALSE(movers[1].walking);
+	EXPECT_TRUE(movers[2].walking);
+	// Without the frame before (the start of the video) the frame after decides; the threshold is inclusive
+	// of a move that long.
+	tools::mark_walking(movers, mask, cv::Mat(), after, 12);
+	EXPECT_TRUE(movers[0].walking);
+	EXPECT_FALSE(movers[1].walking);
+	tools::mark_walking(movers, mask, cv::Mat(), after, 13);
+	EXPECT_FALSE(movers[0].walking);
+	// Covered views are counted among the walking ones apart.
+	tools::GroupScore score;
+	FrameResult frame;
+	frame.groups = {group_at(7, {98, 48, 44, 104}, 1.65, 0, {-1, 0, 5.3}),
+			group_at(8, {300, 60, 40, 100}, 1.0, 0.0, {1, 0, 6})};
+	tools::mark_walking(movers, mask, before, after, 5);
+	score.add(frame, mask, movers);
+	EXPECT_EQ(score.mover_views, 3U);
+	EXPECT_EQ(score.movers_covered, 2U);
+	EXPECT_EQ(score.walking_views, 2U);
+	EXPECT_EQ(score.walking_covered, 1U);
+}
+
 // "Inside a group box" counts a mover whose pixels lie mostly in the box of a group on a mover even when that
 // group is another mover's (two people side by side in one box); a box that only clips a mover, or is on
 // the background, does not count, and a mover no box reaches is counted apart.

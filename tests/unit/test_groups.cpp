@@ -174,6 +174,16 @@ GroupMotionContext through(const geometry::StereoRig &rig)
 	return context;
 }
 
+/// The groups of the second of two frames with the same points (a group is published from its second
+/// frame on), 0.1 s apart without a rig unless `context` says otherwise.
+GroupOutput second_of_two(const std::vector<MotionPoint> &points, const GroupParams &params,
+			  const GroupMotionContext &context = {0.1, std::nullopt, std::nullopt, std::nullopt})
+{
+	AffinityPropagation workspace;
+	const GroupOutput first = find_groups(points, nullptr, context, params, workspace);
+	return find_groups(points, &first.memory, context, params, workspace);
+}
+
 /// `count` points of a still background spread over a 640x480 frame: what a pose-explained scene leaves,
 /// residuals of noise (standard deviation `sigma_px`).
 std::vector<MotionPoint> still_background(std::mt19937 &rng, int count = 120, float sigma_px = 0.2F)
@@ -765,11 +775,7 @@ TEST(Groups, ASmallMoverBesideALargeOneIsClusteredAgain)
 		GroupParams params;
 		params.members = GroupMembers::Labels; // the classifier's dynamic points, slow ones included
 		params.regroup_unplaced = regroup;
-		GroupMotionContext context;
-		context.dt_s = 0.1;
-		AffinityPropagation workspace;
-		const GroupOutput first = find_groups(points, nullptr, context, params, workspace);
-		const GroupOutput out = find_groups(points, &first.memory, context, params, workspace);
+		const GroupOutput out = second_of_two(points, params);
 		ASSERT_EQ(out.groups.size(), regroup ? 3u : 2u) << "regroup " << regroup;
 		const auto small = std::find_if(out.groups.begin(), out.groups.end(),
 						[](const TargetGroup &g) { return g.point_count == 6; });
@@ -777,6 +783,44 @@ TEST(Groups, ASmallMoverBesideALargeOneIsClusteredAgain)
 		if (small != out.groups.end()) {
 			EXPECT_LT(small->image_velocity_pxps[0], 0.F);
 		}
+	}
+}
+
+TEST(Groups, SeveralMoversLeftoversAreClusteredApart)
+{
+	// A large mover (40 points moving 6 px per frame to the right) with three small ones around it (6 points
+	// each: to its right moving down and right, below it moving up and right, to its left moving slower),
+	// and a fourth mover 600 px off that makes the seed's preference (the farthest pair's similarity) low.
+	// The first round hands the small ones the large one's exemplar and the member rule takes them out. They
+	// are clustered again among themselves; at the first round's preference they still share one exemplar,
+	// and the member rule keeps none of them (their median moves like none of them); at a quarter of it each
+	// is a group of its own.
+	std::vector<MotionPoint> points;
+	const auto add = [&points](int count, cv::Point2f at, cv::Point2f motion) {
+		const int columns = count >= 20 ? count / 5 : 2;
+		for (int i = 0; i < count; ++i) {
+			MotionPoint p;
+			p.px = at + cv::Point2f(static_cast<float>(i % columns) * 10.F,
+						static_cast<float>(i / columns) * 10.F);
+			p.flow = p.residual = motion;
+			p.dynamic = true;
+			points.push_back(p);
+		}
+	};
+	add(40, {100.F, 200.F}, {6.F, 0.F});
+	add(6, {200.F, 205.F}, {6.F, 4.F});
+	add(6, {110.F, 270.F}, {6.F, -4.F});
+	add(6, {40.F, 210.F}, {2.F, 0.F});
+	add(20, {700.F, 450.F}, {0.F, 6.F});
+	for (const double scale : {1.0, 0.25}) {
+		GroupParams params;
+		params.members = GroupMembers::Labels;
+		params.regroup_preference_scale = scale;
+		const GroupOutput out = second_of_two(points, params);
+		const auto small = std::count_if(out.groups.begin(), out.groups.end(),
+						 [](const TargetGroup &g) { return g.point_count == 6; });
+		EXPECT_EQ(small, scale < 1 ? 3 : 0) << "regroup preference scale " << scale;
+		EXPECT_EQ(out.groups.size(), 2u + static_cast<size_t>(small)) << "regroup preference scale " << scale;
 	}
 }
 
@@ -824,9 +868,7 @@ TEST(Groups, MonocularMoversApartWhoMoveAlikeAreCutApart)
 			context.dt_s = 0.1;
 			if (with_depth)
 				context.rig = rig;
-			AffinityPropagation workspace;
-			const GroupOutput first = find_groups(points, nullptr, context, params, workspace);
-			const GroupOutput out = find_groups(points, &first.memory, context, params, workspace);
+			const GroupOutput out = second_of_two(points, params, context);
 			const std::string label =
 				std::string(with_depth ? "depth" : "no depth") + ", gap " + std::to_string(gap);
 			const auto walking_right = [](const TargetGroup &g) { return g.image_velocity_pxps[0] > 0; };
