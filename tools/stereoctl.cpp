@@ -187,7 +187,6 @@ cv::Mat load_mask(const fs::path &dir, uint64_t seq)
 	return {};
 }
 
-/// Moving-target groups against the truth's movers (tools/group_eval.hpp).
 /// Which movers of a pixels-only reference walk (tools::mark_walking): against its masks `frames` before and
 /// after, a move of at least `min_move_px`.
 struct WalkingRule {
@@ -195,6 +194,7 @@ struct WalkingRule {
 	double min_move_px = 5;
 };
 
+/// Moving-target groups against the truth's movers (tools/group_eval.hpp).
 int eval_groups(const std::string &results_path, const std::string &truth_dir, const std::string &name, bool json_out,
 		bool count_detail, const WalkingRule &walking)
 {
