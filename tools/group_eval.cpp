@@ -11,22 +11,37 @@
 
 namespace stereod::tools {
 
-std::vector<TrueMover> visible_movers(const cv::Mat &mask, const nlohmann::json &truth, int min_pixels)
-{
-	std::vector<TrueMover> movers;
-	if (mask.empty())
-		return movers;
-	std::array<int, 256> pixels{}; // per mask id
+namespace {
+
+/// Per mask id: its pixel count and their bounding box (empty where the id does not occur).
+struct Blobs {
+	std::array<int, 256> pixels{};
 	std::array<cv::Rect, 256> boxes{};
+};
+
+Blobs blobs_of(const cv::Mat &mask)
+{
+	Blobs b;
 	for (int y = 0; y < mask.rows; ++y) {
 		const auto *row = mask.ptr<uint8_t>(y);
 		for (int x = 0; x < mask.cols; ++x) {
 			if (row[x] == 0)
 				continue;
-			boxes[row[x]] =
-				pixels[row[x]]++ == 0 ? cv::Rect(x, y, 1, 1) : boxes[row[x]] | cv::Rect(x, y, 1, 1);
+			b.boxes[row[x]] =
+				b.pixels[row[x]]++ == 0 ? cv::Rect(x, y, 1, 1) : b.boxes[row[x]] | cv::Rect(x, y, 1, 1);
 		}
 	}
+	return b;
+}
+
+} // namespace
+
+std::vector<TrueMover> visible_movers(const cv::Mat &mask, const nlohmann::json &truth, int min_pixels)
+{
+	std::vector<TrueMover> movers;
+	if (mask.empty())
+		return movers;
+	const auto [pixels, boxes] = blobs_of(mask);
 	cv::Matx33d r_wc = cv::Matx33d::eye();
 	if (truth.contains("camera_pose"))
 		for (int r = 0; r < 3; ++r)
@@ -73,20 +88,6 @@ cv::Rect pixel_box(const TargetGroup &g, const cv::Mat &mask)
 	       cv::Rect(0, 0, mask.cols, mask.rows);
 }
 
-/// Each mask id's bounding box (empty where the id does not occur).
-std::array<cv::Rect, 256> blob_boxes(const cv::Mat &mask)
-{
-	std::array<cv::Rect, 256> boxes{};
-	for (int y = 0; y < mask.rows; ++y) {
-		const auto *row = mask.ptr<uint8_t>(y);
-		for (int x = 0; x < mask.cols; ++x)
-			if (row[x] != 0)
-				boxes[row[x]] = boxes[row[x]].empty() ? cv::Rect(x, y, 1, 1)
-								      : boxes[row[x]] | cv::Rect(x, y, 1, 1);
-	}
-	return boxes;
-}
-
 /// How far the blob that overlaps mover `id` of `mask` most in `other` lies from it: box centres across,
 /// bottoms down; nullopt when no blob of `other` overlaps it.
 std::optional<double> partner_shift(const cv::Mat &mask, int id, const cv::Rect &box, const cv::Mat &other,
@@ -115,7 +116,7 @@ std::optional<double> partner_shift(const cv::Mat &mask, int id, const cv::Rect 
 void mark_walking(std::vector<TrueMover> &movers, const cv::Mat &mask, const cv::Mat &before, const cv::Mat &after,
 		  double min_move_px)
 {
-	const auto before_boxes = blob_boxes(before), after_boxes = blob_boxes(after);
+	const auto before_boxes = blobs_of(before).boxes, after_boxes = blobs_of(after).boxes;
 	for (auto &mover : movers) {
 		if (mover.metric)
 			continue;

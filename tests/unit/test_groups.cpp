@@ -175,13 +175,21 @@ GroupMotionContext through(const geometry::StereoRig &rig)
 }
 
 /// The groups of the second of two frames with the same points (a group is published from its second
-/// frame on), 0.1 s apart without a rig unless `context` says otherwise.
+/// frame on).
 GroupOutput second_of_two(const std::vector<MotionPoint> &points, const GroupParams &params,
-			  const GroupMotionContext &context = {0.1, std::nullopt, std::nullopt, std::nullopt})
+			  const GroupMotionContext &context)
 {
 	AffinityPropagation workspace;
 	const GroupOutput first = find_groups(points, nullptr, context, params, workspace);
 	return find_groups(points, &first.memory, context, params, workspace);
+}
+
+/// The same, frames 0.1 s apart without a rig.
+GroupOutput second_of_two(const std::vector<MotionPoint> &points, const GroupParams &params)
+{
+	GroupMotionContext context;
+	context.dt_s = 0.1;
+	return second_of_two(points, params, context);
 }
 
 /// `count` points of a still background spread over a 640x480 frame: what a pose-explained scene leaves,
