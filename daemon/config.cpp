@@ -806,6 +806,11 @@ const std::vector<Option> &options()
 			"the same; smaller: more clusters among the leftovers)",
 			[](DaemonConfig &c) -> double & { return c.motion.groups.regroup_preference_scale; }, 0.01,
 			100));
+		o.push_back(
+			boolean("groups", "follow_unmatched",
+				"sparse flow: the previous frame's unmatched keypoints are followed by Lucas-Kanade "
+				"and clustered beside the matched ones (seed 002's split only)",
+				[](DaemonConfig &c) -> bool & { return c.motion.groups.follow_unmatched; }));
 		o.push_back(number(
 			"groups", "neighbours", "Affinity Propagation: messages to this many nearest samples",
 			[](DaemonConfig &c) -> int & { return c.motion.groups.affinity.neighbours; }, 1, 10000));

@@ -113,6 +113,11 @@ struct GroupParams {
 	/// 0.828 -> 0.853); 1: the first round's.
 	bool regroup_unplaced = true;
 	double regroup_preference_scale = 0.25;
+	/// The sparse flow: the previous frame's keypoints that no match holds are followed into this frame by
+	/// Lucas-Kanade (follow_unmatched, matching.hpp) and clustered beside the matched ones, where the members
+	/// are chosen by the seed's split (GroupMembers::Flow; no label decides them). They are no frame points:
+	/// they make groups and move their boxes, nothing else.
+	bool follow_unmatched = true;
 };
 
 /// One temporally matched point as the grouping sees it.

@@ -248,7 +248,38 @@ const std::vector<cv::Mat> &pyramid_of(const FrameFeatures &features, std::vecto
 	return scratch;
 }
 
+/// Across which way the window (side `window`) around `at` is one-sided: the unit eigenvector of its structure
+/// tensor's larger eigenvalue when the smaller is under `ratio` of it (an edge, a streak), else (0, 0). From
+/// `derivatives`, a Lucas-Kanade pyramid's level (CV_16SC2).
+cv::Point2f edge_across_in(const cv::Mat &derivatives, cv::Point2f at, int window, double ratio)
+{
+	const int half = window / 2;
+	const int x0 = static_cast<int>(std::lround(at.x)), y0 = static_cast<int>(std::lround(at.y));
+	double sxx = 0, sxy = 0, syy = 0;
+	for (int y = std::max(y0 - half, 0); y <= std::min(y0 + half, derivatives.rows - 1); ++y) {
+		const auto *row = derivatives.ptr<cv::Vec2s>(y);
+		for (int x = std::max(x0 - half, 0); x <= std::min(x0 + half, derivatives.cols - 1); ++x) {
+			const double gx = row[x][0], gy = row[x][1];
+			sxx += gx * gx;
+			sxy += gx * gy;
+			syy += gy * gy;
+		}
+	}
+	const double mean = 0.5 * (sxx + syy), spread = std::hypot(0.5 * (sxx - syy), sxy);
+	if (!(mean + spread > 0) || mean - spread >= ratio * (mean + spread))
+		return {0, 0};
+	const double angle = 0.5 * std::atan2(2 * sxy, sxx - syy);
+	return {static_cast<float>(std::cos(angle)), static_cast<float>(std::sin(angle))};
+}
+
 } // namespace
+
+cv::Point2f edge_across(const FrameFeatures &features, cv::Point2f at, const MatchParams &params, double ratio)
+{
+	if (ratio <= 0 || features.grey_pyramid.size() < 2)
+		return {0, 0};
+	return edge_across_in(features.grey_pyramid[1], at, params.rescue_window_px, ratio);
+}
 
 std::vector<Match> match_features_guided(const FrameFeatures &prev, const FrameFeatures &cur,
 					 std::span<const cv::Point2f> predicted, const MatchParams &params)
@@ -415,6 +446,59 @@ int rescue_matches(const FrameFeatures &prev, const FrameFeatures &cur, std::spa
 		++added;
 	}
 	return added;
+}
+
+std::vector<FollowedPoint> follow_unmatched(const FrameFeatures &prev, const FrameFeatures &cur,
+					    std::span<const cv::Point2f> predicted, std::span<const Match> matches,
+					    const MatchParams &params, double aperture_ratio)
+{
+	if (prev.grey.empty() || cur.grey.empty() || prev.grey.size() != cur.grey.size() || prev.keypoints.empty())
+		return {};
+	std::vector<uint8_t> matched(prev.keypoints.size(), 0);
+	for (const Match &m : matches)
+		matched[static_cast<size_t>(m.prev)] = 1;
+	const bool use_prediction = predicted.size() == prev.keypoints.size();
+	std::vector<int> index;
+	std::vector<cv::Point2f> from, to;
+	for (size_t i = 0; i < prev.keypoints.size(); ++i) {
+		const cv::Point2f start = use_prediction ? predicted[i] : prev.keypoints[i].pt;
+		if (matched[i] != 0 || !std::isfinite(start.x) || !std::isfinite(start.y))
+			continue;
+		index.push_back(static_cast<int>(i));
+		from.push_back(prev.keypoints[i].pt);
+		to.push_back(start);
+	}
+	if (index.empty())
+		return {};
+	const cv::Size window(params.rescue_window_px, params.rescue_window_px);
+	const cv::TermCriteria stop(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 10, 0.03);
+	std::vector<cv::Mat> prev_scratch, cur_scratch;
+	const std::vector<cv::Mat> &prev_pyramid = pyramid_of(prev, prev_scratch, params);
+	const std::vector<cv::Mat> &cur_pyramid = pyramid_of(cur, cur_scratch, params);
+	std::vector<uchar> status, back_status;
+	std::vector<float> error;
+	cv::calcOpticalFlowPyrLK(prev_pyramid, cur_pyramid, from, to, status, error, window, kRescueLevels - 1, stop,
+				 cv::OPTFLOW_USE_INITIAL_FLOW);
+	std::vector<cv::Point2f> back = from;
+	cv::calcOpticalFlowPyrLK(cur_pyramid, prev_pyramid, to, back, back_status, error, window, kRescueLevels - 1,
+				 stop, cv::OPTFLOW_USE_INITIAL_FLOW);
+	const float back2 = params.rescue_back_px * params.rescue_back_px;
+	const auto inside = [&](cv::Point2f p) {
+		return p.x >= 0 && p.y >= 0 && p.x < static_cast<float>(cur.grey.cols) &&
+		       p.y < static_cast<float>(cur.grey.rows);
+	};
+	std::vector<FollowedPoint> followed;
+	for (size_t k = 0; k < index.size(); ++k) {
+		const cv::Point2f round_trip = back[k] - from[k];
+		if (status[k] == 0 || back_status[k] == 0 || !inside(to[k]) || !(round_trip.dot(round_trip) <= back2))
+			continue;
+		const cv::Point2f across =
+			aperture_ratio > 0 && prev_pyramid.size() > 1
+				? edge_across_in(prev_pyramid[1], from[k], params.rescue_window_px, aperture_ratio)
+				: cv::Point2f(0, 0);
+		followed.push_back({index[k], to[k], across});
+	}
+	return followed;
 }
 
 int refine_matches(const FrameFeatures &prev, const FrameFeatures &cur, std::span<const cv::Point2f> prev_pts,

@@ -64,6 +64,31 @@ std::vector<cv::Mat> lk_pyramid(const cv::Mat &grey, const MatchParams &params);
 int rescue_matches(const FrameFeatures &prev, const FrameFeatures &cur, std::span<const cv::Point2f> predicted,
 		   std::vector<Match> &matches, const MatchParams &params);
 
+/// Where a keypoint of `prev` that no match holds went in `cur`, by the image alone.
+struct FollowedPoint {
+	int prev = 0;	  ///< index into the previous frame's keypoints
+	cv::Point2f at{}; ///< where Lucas-Kanade landed in this frame
+	/// On an edge, the unit direction across it (Lucas-Kanade measured the motion that way only); else (0, 0).
+	cv::Point2f across{};
+};
+
+/// The keypoints of `prev` that `matches` leaves out, followed into `cur` by pyramidal Lucas-Kanade as
+/// rescue_matches follows them (from `predicted` when given, checked by following back within
+/// params.rescue_back_px), with no keypoint of `cur` needed where they land: ORB finds a walking person's
+/// corners again in the next frame for about half of them (docs/groups.md, stop 46), and the rest are still
+/// there to follow. A point whose window is one-sided (the smaller eigenvalue of its structure tensor under
+/// `aperture_ratio` of the larger: an edge, a streak) is marked with the direction across it, since
+/// Lucas-Kanade slides along an edge and back again; 0: none is. Nothing without both grey images.
+std::vector<FollowedPoint> follow_unmatched(const FrameFeatures &prev, const FrameFeatures &cur,
+					    std::span<const cv::Point2f> predicted, std::span<const Match> matches,
+					    const MatchParams &params, double aperture_ratio);
+
+/// Across which way the window around `at` in `features`' grey image (side params.rescue_window_px) is
+/// one-sided: the unit eigenvector of its structure tensor's larger eigenvalue when the smaller is under
+/// `ratio` of it (an edge, a streak: the aperture problem), else (0, 0); (0, 0) without the frame's
+/// Lucas-Kanade pyramid or with `ratio` 0.
+cv::Point2f edge_across(const FrameFeatures &features, cv::Point2f at, const MatchParams &params, double ratio);
+
 /// Sub-pixel positions in `cur.grey` of the points `prev_pts` of `prev.grey`, starting from `cur_pts`
 /// (Lucas-Kanade on two pyramid levels, seeded; on the frames' `grey_pyramid`, else built here): a point LK
 /// loses, or moves farther than max_shift_px, keeps its start. Returns how many were refined; nothing without

@@ -55,6 +55,16 @@ void add_cell_depths(FrameFeatures &features, cv::Size size, const MotionParams 
 		cell_depths(features.keypoints, features.xyz, size.width / step, size.height / step, params.dense);
 }
 
+/// Whether the groups cluster followed points beside the matched ones: the sparse flow without a metric pose,
+/// where seed 002's split decides the members. (With a pose the labels decide, and a followed point has
+/// none; nor has it the depth the pose's prediction needs.)
+bool follows_unmatched(const MotionParams &params, bool metric)
+{
+	return params.groups.enabled && params.groups.follow_unmatched && params.dense.method == GroupFlow::Sparse &&
+	       params.groups.members != GroupMembers::Labels && !metric &&
+	       (params.matching.rescue || params.matching.subpixel);
+}
+
 /// Whether keypoint `p` of the previous frame was labelled dynamic or failed a geometric test there.
 bool flagged_before(const TrackSet *prev_tracks, size_t p)
 {
@@ -301,19 +311,24 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 		return tracks;
 	}
 	std::vector<Match> matches;
+	std::vector<FollowedPoint> followed; // for the groups only
 	{
 		StageTimer timer(result.timing, "match");
 		const auto predicted = prev_tracks != nullptr && params.matching.search_radius_px > 0
 					       ? predict_positions(*prev_tracks, prev->keypoints, frame.device_ns)
 					       : std::nullopt;
+		const std::span<const cv::Point2f> prediction =
+			predicted ? std::span<const cv::Point2f>(*predicted) : std::span<const cv::Point2f>();
 		matches = predicted ? match_features_guided(*prev, cur, *predicted, params.matching)
 				    : match_features(*prev, cur, params.matching);
 		if (params.matching.rescue) {
 			StageTimer rescue_timer(result.timing, "rescue");
-			rescue_matches(*prev, cur,
-				       predicted ? std::span<const cv::Point2f>(*predicted)
-						 : std::span<const cv::Point2f>(),
-				       matches, params.matching);
+			rescue_matches(*prev, cur, prediction, matches, params.matching);
+		}
+		if (follows_unmatched(params, metric)) {
+			StageTimer follow_timer(result.timing, "follow");
+			followed = follow_unmatched(*prev, cur, prediction, matches, params.matching,
+						    params.dense.aperture_ratio);
 		}
 	}
 	const size_t n = matches.size();
@@ -557,6 +572,9 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 				m.residual = std::isfinite(own.x) ? own : m.flow; // no scene model: standing still
 			const auto p = static_cast<size_t>(matches[i].prev);
 			m.octave = cur.keypoints[c].octave;
+			if (!cells) // the aperture problem's mark (find_groups drops a group that slid along its edges)
+				m.across =
+					edge_across(*prev, pairs[i].prev, params.matching, params.dense.aperture_ratio);
 			// The anchored test's spread counts too: it is output-only like the groups, and a mover walking
 			// along the optical axis is found mostly by it (its image barely moves, its depth does, and
 			// the anchored test confirms a point or two that the spread extends to its neighbours at
@@ -567,6 +585,19 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 				m.xyz = cur.xyz[c];
 			if (p < prev->xyz.size() && std::isfinite(prev->xyz[p][2]))
 				m.prev_xyz = prev->xyz[p];
+		}
+		// The followed points after the matched ones: clustered, never labelled or published.
+		for (const FollowedPoint &f : followed) {
+			const auto p = static_cast<size_t>(f.prev);
+			MotionPoint m;
+			m.px = f.at;
+			m.flow = f.at - prev->keypoints[p].pt;
+			const cv::Point2f own = own_motion({prev->keypoints[p].pt, f.at, {}, {}},
+							   cv::Point2f(kNaN, kNaN), classification.homography);
+			m.residual = std::isfinite(own.x) ? own : m.flow; // no scene model: standing still
+			m.octave = prev->keypoints[p].octave;
+			m.across = f.across;
+			motion.push_back(m);
 		}
 		GroupMotionContext context;
 		if (prev_tracks != nullptr && frame.device_ns > prev_tracks->t_ns)
@@ -612,6 +643,7 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 		if (found.clustering_ms)
 			result.timing.push_back({"clustering", *found.clustering_ms});
 		group_of_point = std::move(found.group_of_point);
+		group_of_point.resize(n); // the followed points are not frame points
 		tracks.groups = std::move(found.memory);
 		result.groups = std::move(found.groups);
 		if (params.prior.enabled) {
