@@ -308,17 +308,29 @@ TEST(Matching, GuidedFindsTheSameCorrectMatchesAndNoFarLookAlikes)
 	EXPECT_TRUE(match_features_guided(fa, fb, none, mp).empty());
 }
 
+namespace {
+
+/// Image `a` shifted by `shift`, with `covered` then painted over by another texture (seed `other`): what a
+/// mover walking in front of a panning view does.
+cv::Mat shifted_and_covered(const cv::Mat &a, cv::Point2f shift, const cv::Rect &covered, uint64_t other)
+{
+	cv::Mat b;
+	cv::warpAffine(a, b, cv::Matx23d(1, 0, shift.x, 0, 1, shift.y), a.size(), cv::INTER_LINEAR, cv::BORDER_REFLECT);
+	textured_image(covered.width, covered.height, other).copyTo(b(covered));
+	return b;
+}
+
+} // namespace
+
 TEST(Matching, RescueFindsRefusedMatchesAgainWhereTheImageMovedAndNowhereElse)
 {
 	// Frame b is frame a shifted by (7.3, -4.6) px, with one region covered by other texture (what a mover
 	// walking in front does): a keypoint there has no counterpart. A ratio test far stricter than the default
 	// refuses most true matches; the rescue must find them again at the shift, and never inside the region.
 	const cv::Mat a = textured_image(640, 480, 31);
-	cv::Mat b;
 	const cv::Point2f shift(7.3F, -4.6F);
-	cv::warpAffine(a, b, cv::Matx23d(1, 0, shift.x, 0, 1, shift.y), a.size(), cv::INTER_LINEAR, cv::BORDER_REFLECT);
 	const cv::Rect covered(320, 200, 160, 160);
-	textured_image(covered.width, covered.height, 32).copyTo(b(covered));
+	const cv::Mat b = shifted_and_covered(a, shift, covered, 32);
 	FeatureParams params;
 	params.max_features = 800;
 	FrameFeatures fa = extract_features(a, params, 1), fb = extract_features(b, params, 1);
@@ -381,11 +393,9 @@ TEST(Matching, FollowUnmatchedLandsWhereTheImageMovedWithNoKeypointThere)
 	// keypoints at all: the unmatched keypoints of a are followed by the image alone. Half of them are
 	// matched already and must not be followed again.
 	const cv::Mat a = textured_image(640, 480, 41);
-	cv::Mat b;
 	const cv::Point2f shift(6.4F, -3.2F);
-	cv::warpAffine(a, b, cv::Matx23d(1, 0, shift.x, 0, 1, shift.y), a.size(), cv::INTER_LINEAR, cv::BORDER_REFLECT);
 	const cv::Rect covered(320, 200, 160, 160);
-	textured_image(covered.width, covered.height, 42).copyTo(b(covered));
+	const cv::Mat b = shifted_and_covered(a, shift, covered, 42);
 	FeatureParams params;
 	params.max_features = 600;
 	FrameFeatures fa = extract_features(a, params, 1);
