@@ -163,6 +163,42 @@ bool movers_separated(const std::vector<TrueMover> &movers, int margin_px)
 	return true;
 }
 
+namespace {
+
+/// GroupScore::walking_labels for one frame: `mask` holds the movers' ids.
+void score_walking_labels(const FrameResult &result, const cv::Mat &mask, const std::vector<TrueMover> &movers,
+			  LabelScore &score)
+{
+	// Per mask id: 1 a walking mover, 0 not counted, and the scene (id 0) its own case.
+	std::array<uint8_t, 256> walking{};
+	for (const TrueMover &mover : movers)
+		if (mover.id > 0 && mover.id < 256)
+			walking[static_cast<size_t>(mover.id)] = mover.walking ? 1 : 0;
+	++score.frames;
+	for (const LabelledPoint &point : result.points) {
+		const int x = cvRound(point.u), y = cvRound(point.v);
+		if (x < 0 || y < 0 || x >= mask.cols || y >= mask.rows)
+			continue;
+		const uint8_t id = mask.at<uint8_t>(y, x);
+		if (id != 0 && walking[id] == 0)
+			continue;
+		const bool on_walker = id != 0;
+		switch (point.label) {
+		case PointLabel::Dynamic:
+			++(on_walker ? score.dynamic_true : score.dynamic_false);
+			break;
+		case PointLabel::Static:
+			++(on_walker ? score.static_false : score.static_true);
+			break;
+		case PointLabel::Uncertain:
+			++(on_walker ? score.uncertain_on_mover : score.uncertain_on_scene);
+			break;
+		}
+	}
+}
+
+} // namespace
+
 void GroupScore::add(const FrameResult &result, const cv::Mat &mask, const std::vector<TrueMover> &movers)
 {
 	++frames;
@@ -188,6 +224,7 @@ void GroupScore::add(const FrameResult &result, const cv::Mat &mask, const std::
 			separated_movers_missed += groups_on == 0 ? 1 : 0;
 		}
 	}
+	score_walking_labels(result, mask, movers, walking_labels);
 	std::vector<cv::Rect> boxes;
 	boxes.reserve(gs.size());
 	for (const auto &g : gs)
@@ -270,8 +307,8 @@ std::string group_score_table(const std::string &name, const GroupScore &s)
 	       "| "
 	       "mover views covered | inside a group box | untouched | centroid error m (median) | speed error "
 	       "(median) | speed within 10% | heading error deg (median) | heading within 15 deg | id switches | "
-	       "walking views | walking covered |\n";
-	out << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+	       "walking views | walking covered | walking labels precision | recall | F1 |\n";
+	out << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
 	out << "| " << name << " | " << s.frames << " | " << s.frames_separated << " | "
 	    << ratio(s.count_exact, s.frames_separated) << " | " << s.groups << " | "
 	    << ratio(s.groups_on_movers, s.groups) << " | " << s.groups_without_movers << " | "
@@ -280,7 +317,8 @@ std::string group_score_table(const std::string &name, const GroupScore &s)
 	    << median(s.speed_relative_error) << " | " << fraction_below(s.speed_relative_error, 0.10) << " | "
 	    << std::setprecision(1) << median(s.heading_error_deg) << " | " << std::setprecision(3)
 	    << fraction_below(s.heading_error_deg, 15.0) << " | " << s.id_switches << " | " << s.walking_views << " | "
-	    << ratio(s.walking_covered, s.walking_views) << " |\n";
+	    << ratio(s.walking_covered, s.walking_views) << " | " << s.walking_labels.precision() << " | "
+	    << s.walking_labels.recall() << " | " << s.walking_labels.f1() << " |\n";
 	return out.str();
 }
 

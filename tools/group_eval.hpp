@@ -76,6 +76,10 @@ struct GroupScore {
 	uint64_t movers_untouched = 0;
 	/// The mover views where the mover walks (TrueMover::walking), and of those the ones covered.
 	uint64_t walking_views = 0, walking_covered = 0;
+	/// The points' labels against the walking movers (issue 16's "dynamic-label F1 on walking people"): a
+	/// point on a walking mover should be dynamic, one off every mask static; points on a mover standing
+	/// still, or on a blob too small to be a mover, are not counted (a person standing still is neither).
+	LabelScore walking_labels;
 	std::vector<double> centroid_error_m;
 	std::vector<double> speed_relative_error;
 	std::vector<double> heading_error_deg; ///< movers within max_heading_distance_m, moving

@@ -349,6 +349,25 @@ TEST(GroupEvaluation, WalkingMoversFromTheReferencesOwnMasks)
 	EXPECT_EQ(score.movers_covered, 2U);
 	EXPECT_EQ(score.walking_views, 2U);
 	EXPECT_EQ(score.walking_covered, 1U);
+	// The labels against the walkers: the standing mover's points count for nothing either way.
+	tools::GroupScore labels;
+	FrameResult points;
+	points.points = {
+		LabelledPoint{110, 60, PointLabel::Dynamic, 110, 60, 0, std::nullopt},	 // walker: found
+		LabelledPoint{120, 70, PointLabel::Static, 120, 70, 0, std::nullopt},	 // walker: missed
+		LabelledPoint{410, 150, PointLabel::Dynamic, 410, 150, 0, std::nullopt}, // walker (unknown): found
+		LabelledPoint{310, 70, PointLabel::Static, 310, 70, 0, std::nullopt},	 // standing: not counted
+		LabelledPoint{320, 80, PointLabel::Dynamic, 320, 80, 0, std::nullopt},	 // standing: not counted
+		LabelledPoint{20, 20, PointLabel::Dynamic, 20, 20, 0, std::nullopt},	 // scene: wrong
+		LabelledPoint{30, 20, PointLabel::Static, 30, 20, 0, std::nullopt},	 // scene: right
+	};
+	labels.add(points, mask, movers);
+	EXPECT_EQ(labels.walking_labels.dynamic_true, 2U);
+	EXPECT_EQ(labels.walking_labels.static_false, 1U);
+	EXPECT_EQ(labels.walking_labels.dynamic_false, 1U);
+	EXPECT_EQ(labels.walking_labels.static_true, 1U);
+	EXPECT_NEAR(labels.walking_labels.precision(), 2.0 / 3, 1e-9);
+	EXPECT_NEAR(labels.walking_labels.recall(), 2.0 / 3, 1e-9);
 }
 
 // "Inside a group box" counts a mover whose pixels lie mostly in the box of a group on a mover even when that
