@@ -74,11 +74,11 @@ struct FollowedPoint {
 
 /// The keypoints of `prev` that `matches` leaves out, followed into `cur` by pyramidal Lucas-Kanade as
 /// rescue_matches follows them (from `predicted` when given, checked by following back within
-/// params.rescue_back_px), with no keypoint of `cur` needed where they land: ORB finds a walking person's
-/// corners again in the next frame for about half of them (docs/groups.md, stop 46), and the rest are still
-/// there to follow. A point whose window is one-sided (the smaller eigenvalue of its structure tensor under
-/// `aperture_ratio` of the larger: an edge, a streak) is marked with the direction across it, since
-/// Lucas-Kanade slides along an edge and back again; 0: none is. Nothing without both grey images.
+/// params.rescue_back_px), with no keypoint of `cur` needed where they land: the descriptors match only about
+/// half of a walking person's keypoints into the next frame (their corners change shape; docs/groups.md,
+/// stop 46), and the rest are still there to follow. A point whose window is one-sided (the smaller eigenvalue of its
+/// structure tensor under `aperture_ratio` of the larger: an edge, a streak) is marked with the direction across it,
+/// since Lucas-Kanade slides along an edge and back again; 0: none is. Nothing without both grey images.
 std::vector<FollowedPoint> follow_unmatched(const FrameFeatures &prev, const FrameFeatures &cur,
 					    std::span<const cv::Point2f> predicted, std::span<const Match> matches,
 					    const MatchParams &params, double aperture_ratio);
