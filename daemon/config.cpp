@@ -806,6 +806,10 @@ const std::vector<Option> &options()
 			"the same; smaller: more clusters among the leftovers)",
 			[](DaemonConfig &c) -> double & { return c.motion.groups.regroup_preference_scale; }, 0.01,
 			100));
+		o.push_back(boolean(
+			"groups", "keep_labels_in_box",
+			"a point published dynamic in the frame before stays dynamic while inside a group's box",
+			[](DaemonConfig &c) -> bool & { return c.motion.groups.keep_labels_in_box; }));
 		o.push_back(
 			boolean("groups", "follow_unmatched",
 				"sparse flow: the previous frame's unmatched keypoints are followed by Lucas-Kanade "

@@ -68,6 +68,11 @@ struct GroupParams {
 	/// (docs/groups.md, measured on vtest).
 	bool label_points = true;
 	double label_tolerance_px = 2.0;
+	/// Labels: a point published dynamic in the frame before stays dynamic while it lies inside a published
+	/// group's box, whatever its motion this frame: a walker's foot stands still for part of each stride, and
+	/// is still the walker's (docs/groups.md, stop 46: vtest's walking-label F1 0.857 -> 0.872, the stereo
+	/// sim's rigid movers 0.001-0.004 lower).
+	bool keep_labels_in_box = true;
 	/// The same rule for the groups themselves: which members move like their cluster's median, and which
 	/// clusters and tracks move alike. For the dense flow's grid cells (member_area_px2 > 0) tighter than
 	/// the labels' (at 2 px patches of flow noise under pure rotation join into groups); for feature points

@@ -65,6 +65,14 @@ bool follows_unmatched(const MotionParams &params, bool metric)
 	       (params.matching.rescue || params.matching.subpixel);
 }
 
+/// Whether `at` lies inside one of the published groups' boxes.
+bool inside_a_box(cv::Point2f at, const std::vector<TargetGroup> &groups)
+{
+	return std::any_of(groups.begin(), groups.end(), [&](const TargetGroup &g) {
+		return at.x >= g.box_px[0] && at.y >= g.box_px[1] && at.x <= g.box_px[2] && at.y <= g.box_px[3];
+	});
+}
+
 /// Whether keypoint `p` of the previous frame was labelled dynamic or failed a geometric test there.
 bool flagged_before(const TrackSet *prev_tracks, size_t p)
 {
@@ -668,6 +676,7 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 		if (classification.labels[i] == PointLabel::Dynamic || (i < failed.size() && failed[i] != 0))
 			tracks.dynamic_by_keypoint[static_cast<size_t>(matches[i].cur)] = 1;
 	result.points.reserve(n);
+	tracks.published_dynamic_by_keypoint.assign(cur.keypoints.size(), 0);
 	for (size_t i = 0; i < n; ++i) {
 		LabelledPoint point;
 		point.u = pairs[i].cur.x;
@@ -682,6 +691,13 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 		if (in_group || (i < spread.size() && spread[i] != 0))
 			point.label = PointLabel::Dynamic;
 		const auto c = static_cast<size_t>(matches[i].cur);
+		const auto p = static_cast<size_t>(matches[i].prev);
+		if (point.label != PointLabel::Dynamic && params.groups.label_points &&
+		    params.groups.keep_labels_in_box && prev_tracks != nullptr &&
+		    p < prev_tracks->published_dynamic_by_keypoint.size() &&
+		    prev_tracks->published_dynamic_by_keypoint[p] != 0 && inside_a_box(pairs[i].cur, result.groups))
+			point.label = PointLabel::Dynamic;
+		tracks.published_dynamic_by_keypoint[c] = point.label == PointLabel::Dynamic ? 1 : 0;
 		point.track = tracks.by_keypoint[c].id;
 		point.in_person = in_person[i] != 0;
 		if (c < cur.xyz.size() && std::isfinite(cur.xyz[c][2]))

@@ -82,6 +82,9 @@ struct TrackSet {
 	/// Per keypoint: its position minus where the static scene model put it (the pose and its depth, else the
 	/// homography); NaN when there was no prediction. A mover's residual changes little from frame to frame.
 	std::vector<cv::Point2f> residual_by_keypoint;
+	/// Per keypoint: published dynamic in this frame, by any rule (a group's and the anchored spread's
+	/// included). For the output only, like those rules: GroupParams::keep_labels_in_box.
+	std::vector<uint8_t> published_dynamic_by_keypoint;
 	/// Moving-target groups followed so far (core/vision/groups.hpp).
 	GroupMemory groups;
 	/// The person prior's regions in this frame (detected here, or carried from the last detection).

@@ -136,3 +136,58 @@ TEST(PersonPrior, PointsInAPersonBoxLeaveTheMotionFit)
 	EXPECT_GT(with_bg_static, 0.8);
 	EXPECT_GT(with_person_dynamic, 0.8);
 }
+
+// GroupParams::keep_labels_in_box: a mover's part that stands still for a frame (a walker's stance foot)
+// keeps the dynamic label it was published with, while it lies inside the mover's group box; without the
+// rule it is static, since it did not move.
+TEST(GroupLabels, APartStandingStillInsideTheBoxKeepsItsLabel)
+{
+	const cv::Size size(320, 240);
+	const cv::Mat background = texture(size, 3);
+	const cv::Mat body = texture(cv::Size(100, 140), 4);
+	constexpr int kFrames = 7, kStep = 6;
+	// The part standing still in the last frame: a square in the middle of the body, where it was the frame
+	// before, while the rest of the body moves on.
+	const cv::Rect still(40 + (kFrames - 2) * kStep + 35, 70, 30, 40);
+	std::vector<StereoFrame> frames(kFrames);
+	for (int k = 0; k < kFrames; ++k) {
+		frames[k].left = background.clone();
+		body.copyTo(frames[k].left(cv::Rect(40 + k * kStep, 50, body.cols, body.rows)));
+		frames[k].sequence = static_cast<uint64_t>(k);
+		frames[k].device_ns = k * 100'000'000LL;
+	}
+	frames[kFrames - 2].left(still).copyTo(frames[kFrames - 1].left(still));
+	const auto run = [&](bool keep) {
+		MotionParams params;
+		params.groups.keep_labels_in_box = keep;
+		std::vector<StageTime> timing;
+		StageWorkspace workspace;
+		std::vector<FrameFeatures> features;
+		std::vector<TrackSet> tracks;
+		FrameResult result;
+		for (int k = 0; k < kFrames; ++k) {
+			features.push_back(extract_stage(frames[k], params, timing));
+			result = FrameResult{};
+			tracks.push_back(pair_stage(k > 0 ? &features[static_cast<size_t>(k - 1)] : nullptr,
+						    k > 0 ? &tracks.back() : nullptr, features.back(), frames[k],
+						    params, result, workspace));
+		}
+		// The last frame's points well inside the still part: how many, and how many dynamic.
+		const cv::Rect inner(still.x + 6, still.y + 6, still.width - 12, still.height - 12);
+		int inside = 0, dynamic = 0, boxes_over = 0;
+		for (const LabelledPoint &p : result.points)
+			if (inner.contains(cv::Point(cvRound(p.u), cvRound(p.v)))) {
+				++inside;
+				dynamic += p.label == PointLabel::Dynamic ? 1 : 0;
+			}
+		for (const TargetGroup &g : result.groups)
+			boxes_over += g.box_px[0] <= still.x && g.box_px[2] >= still.br().x ? 1 : 0;
+		return std::array<int, 3>{inside, dynamic, boxes_over};
+	};
+	// Measured: 10 points there, none dynamic without the rule, all 10 with it.
+	const auto off = run(false), on = run(true);
+	ASSERT_GE(on[2], 1) << "the body is a group whose box covers the still part";
+	ASSERT_GE(off[0], 3);
+	EXPECT_LE(off[1], off[0] / 3) << "without the rule the still part is mostly static";
+	EXPECT_GE(on[1], on[0] * 2 / 3) << "with it, mostly dynamic";
+}
