@@ -29,6 +29,21 @@ LabelScore &LabelScore::operator+=(const LabelScore &o)
 	return *this;
 }
 
+void LabelScore::add(PointLabel label, bool on_mover)
+{
+	switch (label) {
+	case PointLabel::Dynamic:
+		++(on_mover ? dynamic_true : dynamic_false);
+		break;
+	case PointLabel::Static:
+		++(on_mover ? static_false : static_true);
+		break;
+	case PointLabel::Uncertain:
+		++(on_mover ? uncertain_on_mover : uncertain_on_scene);
+		break;
+	}
+}
+
 double LabelScore::precision() const
 {
 	return ratio(dynamic_true, dynamic_true + dynamic_false);
@@ -113,18 +128,7 @@ LabelScore score_frame(const FrameResult &result, const cv::Mat &mask, int borde
 			continue;
 		if (!ambiguous.empty() && ambiguous.at<uint8_t>(y, x))
 			continue;
-		const bool on_mover = mask.at<uint8_t>(y, x) != 0;
-		switch (point.label) {
-		case PointLabel::Dynamic:
-			++(on_mover ? score.dynamic_true : score.dynamic_false);
-			break;
-		case PointLabel::Static:
-			++(on_mover ? score.static_false : score.static_true);
-			break;
-		case PointLabel::Uncertain:
-			++(on_mover ? score.uncertain_on_mover : score.uncertain_on_scene);
-			break;
-		}
+		score.add(point.label, mask.at<uint8_t>(y, x) != 0);
 	}
 	return score;
 }

@@ -24,6 +24,8 @@ struct LabelScore {
 	double mover_coverage_sum = 0; ///< sum over frames of the fraction of pixels on movers
 
 	LabelScore &operator+=(const LabelScore &other);
+	/// Counts one point with `label`, lying on a mover or on the static scene.
+	void add(PointLabel label, bool on_mover);
 	[[nodiscard]] double precision() const;
 	[[nodiscard]] double recall() const;
 	[[nodiscard]] double f1() const;

@@ -182,18 +182,7 @@ void score_walking_labels(const FrameResult &result, const cv::Mat &mask, const 
 		const uint8_t id = mask.at<uint8_t>(y, x);
 		if (id != 0 && walking[id] == 0)
 			continue;
-		const bool on_walker = id != 0;
-		switch (point.label) {
-		case PointLabel::Dynamic:
-			++(on_walker ? score.dynamic_true : score.dynamic_false);
-			break;
-		case PointLabel::Static:
-			++(on_walker ? score.static_false : score.static_true);
-			break;
-		case PointLabel::Uncertain:
-			++(on_walker ? score.uncertain_on_mover : score.uncertain_on_scene);
-			break;
-		}
+		score.add(point.label, id != 0);
 	}
 }
 
