@@ -810,6 +810,17 @@ const std::vector<Option> &options()
 			"groups", "keep_labels_in_box",
 			"a point published dynamic in the frame before stays dynamic while inside a group's box",
 			[](DaemonConfig &c) -> bool & { return c.motion.groups.keep_labels_in_box; }));
+		o.push_back(number(
+			"groups", "new_in_box_frames",
+			"labels: a point whose track is at most this many frames old, within the members' extent "
+			"of a group whose box shows new corners twice as often as the static scene (at its "
+			"depth), is dynamic; 0: off",
+			[](DaemonConfig &c) -> int & { return c.motion.groups.new_in_box_frames; }, 0, 1000));
+		o.push_back(number(
+			"groups", "new_below_box_share",
+			"labels: new_in_box_frames also takes the new points under such a group's members, down "
+			"to this share of their height (a walker's standing leg; an upright camera); 0: none",
+			[](DaemonConfig &c) -> double & { return c.motion.groups.new_below_box_share; }, 0, 10));
 		o.push_back(
 			boolean("groups", "follow_unmatched",
 				"sparse flow: the previous frame's unmatched keypoints are followed by Lucas-Kanade "

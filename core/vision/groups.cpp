@@ -394,6 +394,76 @@ void join_groups(const std::vector<MotionPoint> &points, const GroupOutput &foun
 	}
 }
 
+std::vector<uint8_t> boxes_renewing_corners(std::span<const cv::Point2f> at, std::span<const uint32_t> age,
+					    std::span<const uint8_t> dynamic, const std::vector<TargetGroup> &groups,
+					    uint32_t young_frames, size_t min_points)
+{
+	std::vector<uint8_t> renewing(groups.size(), 0);
+	std::vector<size_t> inside(groups.size(), 0), young_inside(groups.size(), 0);
+	size_t outside = 0, young_outside = 0;
+	const size_t n = std::min({at.size(), age.size(), dynamic.size()});
+	for (size_t i = 0; i < n; ++i) {
+		const bool young = age[i] <= young_frames;
+		bool in_any = false;
+		for (size_t g = 0; g < groups.size(); ++g) {
+			const auto &b = groups[g].box_px;
+			if (at[i].x < b[0] || at[i].y < b[1] || at[i].x > b[2] || at[i].y > b[3])
+				continue;
+			in_any = true;
+			++inside[g];
+			young_inside[g] += young ? 1 : 0;
+		}
+		if (!in_any && dynamic[i] == 0) {
+			++outside;
+			young_outside += young ? 1 : 0;
+		}
+	}
+	if (outside == 0)
+		return renewing;
+	for (size_t g = 0; g < groups.size(); ++g)
+		// young_inside / inside >= 2 young_outside / outside, without the divisions.
+		renewing[g] = inside[g] >= std::max<size_t>(min_points, 1) &&
+			      young_inside[g] * outside >= 2 * young_outside * inside[g] && young_inside[g] > 0;
+	return renewing;
+}
+
+std::vector<uint8_t> new_corners_of_groups(std::span<const cv::Point2f> at, std::span<const uint32_t> age,
+					   std::span<const float> depth_m, std::span<const uint8_t> dynamic,
+					   const std::vector<TargetGroup> &groups, double margin_px,
+					   const GroupParams &params)
+{
+	const size_t n = std::min({at.size(), age.size(), depth_m.size(), dynamic.size()});
+	std::vector<uint8_t> found(n, 0);
+	if (params.new_in_box_frames <= 0)
+		return found;
+	const auto young_frames = static_cast<uint32_t>(params.new_in_box_frames);
+	const std::vector<uint8_t> renewing =
+		boxes_renewing_corners(at, age, dynamic, groups, young_frames, static_cast<size_t>(params.min_points));
+	for (size_t i = 0; i < n; ++i) {
+		if (dynamic[i] != 0 || age[i] > young_frames)
+			continue;
+		for (size_t g = 0; g < groups.size(); ++g) {
+			const auto &b = groups[g].box_px;
+			// The members' extent (the box without its margin), as feature points join a group by
+			// (join_groups): a new point in the margin is as often the background's at the outline.
+			const double x0 = b[0] + margin_px, y0 = b[1] + margin_px, x1 = b[2] - margin_px,
+				     y1 = b[3] - margin_px;
+			const double bottom = y1 + params.new_below_box_share * (y1 - y0);
+			if (renewing[g] == 0 || at[i].x < x0 || at[i].x > x1 || at[i].y < y0 || at[i].y > bottom)
+				continue;
+			const float z = depth_m[i];
+			if (std::isfinite(z) && groups[g].position_m) {
+				const double group_z = (*groups[g].position_m)[2];
+				if (std::abs(z - group_z) > params.split_same_depth * std::min<double>(z, group_z))
+					continue;
+			}
+			found[i] = 1;
+			break;
+		}
+	}
+	return found;
+}
+
 namespace {
 
 /// On an edge (`across` set), with a residual across it under `min_flow_px`: whatever the point's whole

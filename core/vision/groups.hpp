@@ -5,6 +5,7 @@
 // exists, a 3D position, extent and velocity.
 #include <cstdint>
 #include <optional>
+#include <span>
 #include <vector>
 
 #include <opencv2/core.hpp>
@@ -73,6 +74,20 @@ struct GroupParams {
 	/// is still the walker's (docs/groups.md, stop 46: vtest's walking-label F1 0.857 -> 0.872, the stereo
 	/// sim's rigid movers 0.001-0.004 lower).
 	bool keep_labels_in_box = true;
+	/// Labels: a point whose track is at most this many frames old (1: followed from the frame before only)
+	/// that lies in a published group's box, at the group's depth where both have one, is dynamic whatever its
+	/// motion this frame, when the box shows new corners at least twice as often as the static scene does
+	/// (new_corners_of_groups); 0: off. A walker shows new corners every frame as its limbs and folds move,
+	/// while the static scene inside its box was mostly followed before it came; one frame's motion cannot
+	/// tell its standing foot from the ground beside it. A rigid mover keeps its corners, and a camera
+	/// moving through the scene renews the scene's own, so neither passes the test (docs/groups.md, stop 47).
+	/// Inside the members' extent only (the box without its margin), as points join a group (join_groups).
+	int new_in_box_frames = 2;
+	/// The same for the new corners under the members' extent, down to this share of its height: a walker's
+	/// members are what moves with its body (trunk, arms), and its standing leg and foot below them are not;
+	/// a person's legs are about as long as the trunk and head are tall. 0: the extent only. It assumes an
+	/// upright camera (docs/groups.md, stop 47).
+	double new_below_box_share = 1.0;
 	/// The same rule for the groups themselves: which members move like their cluster's median, and which
 	/// clusters and tracks move alike. For the dense flow's grid cells (member_area_px2 > 0) tighter than
 	/// the labels' (at 2 px patches of flow noise under pure rotation join into groups); for feature points
@@ -194,6 +209,25 @@ std::vector<uint32_t> strong_motion(const std::vector<MotionPoint> &points, cons
 /// feature points, when the groups came from the dense flow's cells).
 void join_groups(const std::vector<MotionPoint> &points, const GroupOutput &found, const GroupParams &params,
 		 std::vector<int> &group_of_point);
+
+/// Per published group: whether its box shows new corners (points whose track is at most `young_frames`
+/// old) at least twice as often as the static scene does (the points in no box and not `dynamic`), so that a
+/// new corner in it is more likely the mover's than the scene's. Boxes with fewer than `min_points` points
+/// (at least one): false.
+std::vector<uint8_t> boxes_renewing_corners(std::span<const cv::Point2f> at, std::span<const uint32_t> age,
+					    std::span<const uint8_t> dynamic, const std::vector<TargetGroup> &groups,
+					    uint32_t young_frames, size_t min_points);
+
+/// Labels (GroupParams::new_in_box_frames): per point, whether it is not `dynamic`, new to the tracks (`age`
+/// at most new_in_box_frames) and lies on a group whose box renews its corners (boxes_renewing_corners):
+/// inside the members' extent (the published box without its `margin_px`) or under it by
+/// new_below_box_share of the extent's height, and at the group's depth (within split_same_depth of the
+/// nearer) where both have one (`depth_m` NaN: none). `at`, `age`, `depth_m` and `dynamic` hold one entry per
+/// point.
+std::vector<uint8_t> new_corners_of_groups(std::span<const cv::Point2f> at, std::span<const uint32_t> age,
+					   std::span<const float> depth_m, std::span<const uint8_t> dynamic,
+					   const std::vector<TargetGroup> &groups, double margin_px,
+					   const GroupParams &params);
 
 /// Groups of this frame from its points and the previous frame's memory (null on the first frame).
 /// `workspace` keeps Affinity Propagation's buffers between calls.

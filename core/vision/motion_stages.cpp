@@ -552,7 +552,8 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 		tracks.residual_by_keypoint[static_cast<size_t>(matches[i].cur)] =
 			own_motion(pairs[i], i < predicted.size() ? predicted[i] : cv::Point2f(kNaN, kNaN),
 				   classification.homography);
-	std::vector<int> group_of_point; // per match: the published group it moves with, or -1
+	std::vector<int> group_of_point;			  // per match: the published group it moves with, or -1
+	double published_margin_px = params.groups.box_margin_px; // around the members in the published boxes
 	// Seed 002's global flow, when the groups take their members from it.
 	std::optional<CellFlow> cells;
 	if (params.groups.enabled && params.dense.method != GroupFlow::Sparse && !prev->flow_image.empty() &&
@@ -632,6 +633,7 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 				cell_motion(*cells, params.dense, prev->cell_depth, cur.cell_depth, model);
 			group_params.members = GroupMembers::Flow;
 			group_params.box_margin_px = 0.5 * params.dense.step_px;
+			published_margin_px = group_params.box_margin_px;
 			group_params.member_area_px2 = static_cast<double>(params.dense.step_px) * params.dense.step_px;
 			group_params.min_points = std::max(group_params.min_points, params.dense.min_cells);
 			const std::vector<uint32_t> strong =
@@ -677,6 +679,25 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 			tracks.dynamic_by_keypoint[static_cast<size_t>(matches[i].cur)] = 1;
 	result.points.reserve(n);
 	tracks.published_dynamic_by_keypoint.assign(cur.keypoints.size(), 0);
+	// Per match: new to the tracks and on a group that shows new corners (new_corners_of_groups).
+	std::vector<uint8_t> new_on_group;
+	if (params.groups.label_points && params.groups.new_in_box_frames > 0 && !result.groups.empty()) {
+		at.resize(n); // the matches' positions, as for the prior's regions
+		std::vector<uint32_t> age(n);
+		std::vector<float> depth(n, std::numeric_limits<float>::quiet_NaN());
+		std::vector<uint8_t> dynamic(n);
+		for (size_t i = 0; i < n; ++i) {
+			const auto c = static_cast<size_t>(matches[i].cur);
+			at[i] = pairs[i].cur;
+			age[i] = tracks.by_keypoint[c].age;
+			if (c < cur.xyz.size())
+				depth[i] = cur.xyz[c][2];
+			dynamic[i] = classification.labels[i] == PointLabel::Dynamic ||
+				     (i < group_of_point.size() && group_of_point[i] >= 0);
+		}
+		new_on_group = new_corners_of_groups(at, age, depth, dynamic, result.groups, published_margin_px,
+						     params.groups);
+	}
 	for (size_t i = 0; i < n; ++i) {
 		LabelledPoint point;
 		point.u = pairs[i].cur.x;
@@ -696,6 +717,8 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 		    params.groups.keep_labels_in_box && prev_tracks != nullptr &&
 		    p < prev_tracks->published_dynamic_by_keypoint.size() &&
 		    prev_tracks->published_dynamic_by_keypoint[p] != 0 && inside_a_box(pairs[i].cur, result.groups))
+			point.label = PointLabel::Dynamic;
+		if (i < new_on_group.size() && new_on_group[i] != 0)
 			point.label = PointLabel::Dynamic;
 		tracks.published_dynamic_by_keypoint[c] = point.label == PointLabel::Dynamic ? 1 : 0;
 		point.track = tracks.by_keypoint[c].id;

@@ -1,6 +1,7 @@
 // Affinity Propagation and the grouping of moving points, on constructed data with known answers.
 #include <algorithm>
 #include <array>
+#include <limits>
 #include <random>
 #include <set>
 
@@ -902,4 +903,118 @@ TEST(Groups, MonocularMoversApartWhoMoveAlikeAreCutApart)
 			EXPECT_GE(out.group_of_point[n - 2], 0) << "the slow point inside joins: " << label;
 			EXPECT_EQ(out.group_of_point[n - 1], -1) << "the point beside stays out: " << label;
 		}
+}
+
+namespace {
+
+/// A frame's points for new_corners_of_groups: a static scene of `scene` points on a grid over 640x480, the
+/// first `scene_young` of them new to the tracks, and `inside` points on a 10x10 grid in the box
+/// (100, 100)-(160, 220), the first `inside_young` of them new.
+struct CornerScene {
+	std::vector<cv::Point2f> at;
+	std::vector<uint32_t> age;
+	std::vector<float> depth;
+	std::vector<uint8_t> dynamic;
+	std::vector<TargetGroup> groups;
+
+	CornerScene(int scene, int scene_young, int inside, int inside_young)
+	{
+		for (int k = 0; k < scene; ++k)
+			add({300.F + static_cast<float>(k % 30) * 10.F, 20.F + static_cast<float>(k / 30) * 10.F},
+			    k < scene_young ? 1U : 20U);
+		for (int k = 0; k < inside; ++k)
+			add({105.F + static_cast<float>(k % 10) * 5.F, 105.F + static_cast<float>(k / 10) * 10.F},
+			    k < inside_young ? 1U : 20U);
+		TargetGroup g;
+		g.box_px = {100, 100, 160, 220};
+		groups.push_back(g);
+	}
+	size_t add(cv::Point2f p, uint32_t a, float z = std::numeric_limits<float>::quiet_NaN())
+	{
+		at.push_back(p);
+		age.push_back(a);
+		depth.push_back(z);
+		dynamic.push_back(0);
+		return at.size() - 1;
+	}
+	std::vector<uint8_t> found(const GroupParams &params, double margin_px = 0) const
+	{
+		return new_corners_of_groups(at, age, depth, dynamic, groups, margin_px, params);
+	}
+};
+
+} // namespace
+
+// GroupParams::new_in_box_frames: a box whose points are new to the tracks far more often than the static
+// scene's (a walker's changing corners) hands its new points the group's label, in it and under it by
+// new_below_box_share of its height; its old points, new points beside it, and new points further down
+// stay as they were. A box no newer than the scene (a rigid mover) hands none.
+TEST(GroupLabels, NewCornersOnABoxThatRenewsThemAreTheGroups)
+{
+	GroupParams params;
+	params.new_in_box_frames = 2;
+	params.new_below_box_share = 0.5;
+	{
+		CornerScene s(300, 30, 40, 20); // the scene 10 % new, the box 50 %
+		const size_t old_inside = s.add({130, 150}, 5);
+		const size_t beside = s.add({170, 150}, 1);
+		const size_t under = s.add({130, 270}, 1);     // 50 px under the box: within half its 120 px
+		const size_t far_under = s.add({130, 290}, 1); // 70 px under
+		const size_t new_outside = s.add({400, 400}, 1);
+		const auto found = s.found(params);
+		for (size_t k = 300; k < 320; ++k)
+			EXPECT_EQ(found[k], 1) << "the box's new point " << k;
+		for (size_t k = 320; k < 340; ++k)
+			EXPECT_EQ(found[k], 0) << "the box's old point " << k;
+		EXPECT_EQ(found[old_inside], 0);
+		EXPECT_EQ(found[beside], 0);
+		EXPECT_EQ(found[under], 1);
+		EXPECT_EQ(found[far_under], 0);
+		EXPECT_EQ(found[new_outside], 0);
+		params.new_below_box_share = 0;
+		EXPECT_EQ(s.found(params)[under], 0) << "the box only";
+		// A margin of 8 px around the members: a new point 5 px inside the box's edge is in it, not theirs.
+		const size_t in_margin = s.add({155, 150}, 1);
+		EXPECT_EQ(s.found(params)[in_margin], 1);
+		EXPECT_EQ(s.found(params, 8)[in_margin], 0);
+		EXPECT_EQ(s.found(params, 8)[315], 1) << "a new point well inside (130, 115)";
+		params.new_below_box_share = 0.5;
+		params.new_in_box_frames = 0;
+		const auto off = s.found(params);
+		EXPECT_EQ(std::count(off.begin(), off.end(), 1), 0) << "off";
+		params.new_in_box_frames = 2;
+		s.dynamic[300] = 1;
+		EXPECT_EQ(s.found(params)[300], 0) << "a point already dynamic is left as it is";
+	}
+	{
+		CornerScene s(300, 30, 40, 6); // the box 15 %: under twice the scene's 10 %
+		const auto found = s.found(params);
+		EXPECT_EQ(std::count(found.begin(), found.end(), 1), 0);
+		EXPECT_EQ(boxes_renewing_corners(s.at, s.age, s.dynamic, s.groups, 2, 5)[0], 0);
+	}
+	{
+		CornerScene s(300, 30, 40, 9); // 22.5 %: over twice 10 %
+		EXPECT_EQ(boxes_renewing_corners(s.at, s.age, s.dynamic, s.groups, 2, 5)[0], 1);
+		EXPECT_EQ(boxes_renewing_corners(s.at, s.age, s.dynamic, s.groups, 2, 50)[0], 0)
+			<< "fewer points in the box than min_points";
+	}
+}
+
+// With depth, a new point in a renewing box is the group's only at the group's depth (split_same_depth).
+TEST(GroupLabels, NewCornersJoinOnlyAtTheGroupsDepth)
+{
+	GroupParams params;
+	params.new_in_box_frames = 2;
+	params.split_same_depth = 0.1;
+	CornerScene s(300, 30, 40, 20);
+	s.groups[0].position_m = std::array<double, 3>{0.5, 0.2, 5.0};
+	const size_t near_it = s.add({130, 150}, 1, 5.3F);
+	const size_t behind = s.add({131, 150}, 1, 8.0F);
+	const size_t in_front = s.add({132, 150}, 1, 3.0F);
+	const size_t no_depth = s.add({133, 150}, 1);
+	const auto found = s.found(params);
+	EXPECT_EQ(found[near_it], 1);
+	EXPECT_EQ(found[behind], 0);
+	EXPECT_EQ(found[in_front], 0);
+	EXPECT_EQ(found[no_depth], 1);
 }
