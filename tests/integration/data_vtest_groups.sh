@@ -4,18 +4,11 @@
 # a group box in at least 90 % of the views where they walk, under 10 % of the boxes on the background, and a
 # dynamic-label F1 on the walking people of at least 0.9. Also that the label rule of stop 47
 # (groups.new_in_box_frames) is what lifts the F1: with it off the figure is lower. Needs ../shared/data.
-set -euo pipefail
-STEREOD=$1
-STEREOCTL=$2
-DATA=$3
-VIDEO=$DATA/opencv_samples/vtest.avi
-if [ ! -f "$VIDEO" ]; then
-	echo "SKIP: $VIDEO is absent (this test needs ../shared/data beside the checkout)"
-	exit 77
-fi
-WORK=$(mktemp -d /tmp/stereod-it.XXXXXX)
-trap 'rm -rf "$WORK"' EXIT
-fail() { echo "FAIL: $*"; exit 1; }
+# Usage: data_vtest_groups.sh STEREOD STEREOCTL DATA_DIR
+VIDEO=$3/opencv_samples/vtest.avi
+set -- "$1" "$2"
+source "$(dirname "$0")/lib.sh"
+[ -f "$VIDEO" ] || { echo "SKIP: $VIDEO is absent (this test needs ../shared/data beside the checkout)"; exit 77; }
 
 "$STEREOCTL" reference --input "$VIDEO" --format video -o "$WORK/ref" >/dev/null 2>&1
 run() { # name, extra --set ...
@@ -38,4 +31,4 @@ awk -v a="$covered" 'BEGIN { exit !(a >= 0.9) }' || fail "walkers inside a box i
 awk -v a="$on_movers" 'BEGIN { exit !(a > 0.9) }' || fail "$on_movers of the boxes on a mover: over 10 % on the background"
 awk -v a="$f1" 'BEGIN { exit !(a >= 0.9) }' || fail "walking-label F1 $f1, want >= 0.9"
 awk -v a="$f1" -v b="$f1_off" 'BEGIN { exit !(a > b + 0.01) }' || fail "new_in_box_frames lifts the F1 from $f1_off to $f1 only"
-echo "ok: issue 16's vtest acceptance holds"
+pass "issue 16's vtest acceptance holds"
