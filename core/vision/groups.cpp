@@ -394,6 +394,12 @@ void join_groups(const std::vector<MotionPoint> &points, const GroupOutput &foun
 	}
 }
 
+bool box_holds(const TargetGroup &group, cv::Point2f at)
+{
+	const auto &b = group.box_px;
+	return at.x >= b[0] && at.y >= b[1] && at.x <= b[2] && at.y <= b[3];
+}
+
 std::vector<uint8_t> boxes_renewing_corners(std::span<const cv::Point2f> at, std::span<const uint32_t> age,
 					    std::span<const uint8_t> dynamic, const std::vector<TargetGroup> &groups,
 					    uint32_t young_frames, size_t min_points)
@@ -406,8 +412,7 @@ std::vector<uint8_t> boxes_renewing_corners(std::span<const cv::Point2f> at, std
 		const bool young = age[i] <= young_frames;
 		bool in_any = false;
 		for (size_t g = 0; g < groups.size(); ++g) {
-			const auto &b = groups[g].box_px;
-			if (at[i].x < b[0] || at[i].y < b[1] || at[i].x > b[2] || at[i].y > b[3])
+			if (!box_holds(groups[g], at[i]))
 				continue;
 			in_any = true;
 			++inside[g];
@@ -451,12 +456,10 @@ std::vector<uint8_t> new_corners_of_groups(std::span<const cv::Point2f> at, std:
 			const double bottom = y1 + params.new_below_box_share * (y1 - y0);
 			if (renewing[g] == 0 || at[i].x < x0 || at[i].x > x1 || at[i].y < y0 || at[i].y > bottom)
 				continue;
-			const float z = depth_m[i];
-			if (std::isfinite(z) && groups[g].position_m) {
-				const double group_z = (*groups[g].position_m)[2];
-				if (std::abs(z - group_z) > params.split_same_depth * std::min<double>(z, group_z))
-					continue;
-			}
+			if (std::isfinite(depth_m[i]) && groups[g].position_m &&
+			    !at_one_depth(depth_m[i], static_cast<float>((*groups[g].position_m)[2]),
+					  params.split_same_depth))
+				continue;
 			found[i] = 1;
 			break;
 		}

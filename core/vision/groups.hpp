@@ -75,13 +75,13 @@ struct GroupParams {
 	/// sim's rigid movers 0.001-0.004 lower).
 	bool keep_labels_in_box = true;
 	/// Labels: a point whose track is at most this many frames old (1: followed from the frame before only)
-	/// that lies in a published group's box, at the group's depth where both have one, is dynamic whatever its
-	/// motion this frame, when the box shows new corners at least twice as often as the static scene does
+	/// that lies within a published group's members' extent (its box without the margin, where points join
+	/// a group too: join_groups), at the group's depth where both have one, is dynamic whatever its motion
+	/// this frame, when the box shows new corners at least twice as often as the static scene does
 	/// (new_corners_of_groups); 0: off. A walker shows new corners every frame as its limbs and folds move,
 	/// while the static scene inside its box was mostly followed before it came; one frame's motion cannot
 	/// tell its standing foot from the ground beside it. A rigid mover keeps its corners, and a camera
 	/// moving through the scene renews the scene's own, so neither passes the test (docs/groups.md, stop 47).
-	/// Inside the members' extent only (the box without its margin), as points join a group (join_groups).
 	int new_in_box_frames = 2;
 	/// The same for the new corners under the members' extent, down to this share of its height: a walker's
 	/// members are what moves with its body (trunk, arms), and its standing leg and foot below them are not;
@@ -209,6 +209,9 @@ std::vector<uint32_t> strong_motion(const std::vector<MotionPoint> &points, cons
 /// feature points, when the groups came from the dense flow's cells).
 void join_groups(const std::vector<MotionPoint> &points, const GroupOutput &found, const GroupParams &params,
 		 std::vector<int> &group_of_point);
+
+/// Whether `at` lies in the group's published box (its edges included).
+bool box_holds(const TargetGroup &group, cv::Point2f at);
 
 /// Per published group: whether its box shows new corners (points whose track is at most `young_frames`
 /// old) at least twice as often as the static scene does (the points in no box and not `dynamic`), so that a

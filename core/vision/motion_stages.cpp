@@ -68,9 +68,7 @@ bool follows_unmatched(const MotionParams &params, bool metric)
 /// Whether `at` lies inside one of the published groups' boxes.
 bool inside_a_box(cv::Point2f at, const std::vector<TargetGroup> &groups)
 {
-	return std::any_of(groups.begin(), groups.end(), [&](const TargetGroup &g) {
-		return at.x >= g.box_px[0] && at.y >= g.box_px[1] && at.x <= g.box_px[2] && at.y <= g.box_px[3];
-	});
+	return std::any_of(groups.begin(), groups.end(), [&](const TargetGroup &g) { return box_holds(g, at); });
 }
 
 /// Whether keypoint `p` of the previous frame was labelled dynamic or failed a geometric test there.
