@@ -8,6 +8,7 @@
 #include <opencv2/video/tracking.hpp>
 
 #include "core/vision/stereo.hpp"
+#include "core/vision/structure_tensor.hpp"
 
 namespace stereod::vision {
 namespace {
@@ -35,16 +36,12 @@ std::vector<cv::Point2f> edge_directions(const cv::Mat &image, int cols, int row
 		for (int c = 0; c < cols; ++c) {
 			const int x = static_cast<int>((c + 0.5) * step_x), y = static_cast<int>((r + 0.5) * step_y);
 			const double sxx = xx.at<float>(y, x), sxy = xy.at<float>(y, x), syy = yy.at<float>(y, x);
-			// Eigenvalues of [[sxx, sxy], [sxy, syy]]; the larger one's eigenvector is the way across the
-			// edges.
-			const double mean = 0.5 * (sxx + syy), spread = std::hypot(0.5 * (sxx - syy), sxy);
-			const double large = mean + spread, small = mean - spread;
-			if (!(large > 0) || small >= ratio * large)
+			const std::optional<double> angle = edge_angle(sxx, sxy, syy, ratio);
+			if (!angle)
 				continue;
 			// In full-resolution pixels the direction is the same when both axes scale alike (they do: the
 			// flow image is the left image resized by one factor); scaled per axis to stay exact otherwise.
-			const double angle = 0.5 * std::atan2(2 * sxy, sxx - syy);
-			cv::Point2d dir(std::cos(angle) / to_full_x, std::sin(angle) / to_full_y);
+			cv::Point2d dir(std::cos(*angle) / to_full_x, std::sin(*angle) / to_full_y);
 			dir /= std::hypot(dir.x, dir.y);
 			across[static_cast<size_t>(r * cols + c)] = cv::Point2f(dir);
 		}

@@ -5,10 +5,13 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <optional>
 
 #include <opencv2/video/tracking.hpp>
 
 #include <opencv2/features2d.hpp>
+
+#include "core/vision/structure_tensor.hpp"
 
 namespace stereod::vision {
 namespace {
@@ -248,6 +251,20 @@ const std::vector<cv::Mat> &pyramid_of(const FrameFeatures &features, std::vecto
 	return scratch;
 }
 
+/// Lucas-Kanade as the rescue and the followed points use it, on the frames' pyramids (kRescueLevels levels,
+/// the rescue's window): each point of `from` in `from_pyramid` to where it lies in `to_pyramid`, from the
+/// guess in `to` (overwritten); `status` 0 where it was lost.
+void follow_by_lk(const std::vector<cv::Mat> &from_pyramid, const std::vector<cv::Mat> &to_pyramid,
+		  const std::vector<cv::Point2f> &from, std::vector<cv::Point2f> &to, std::vector<uchar> &status,
+		  const MatchParams &params)
+{
+	std::vector<float> error;
+	cv::calcOpticalFlowPyrLK(from_pyramid, to_pyramid, from, to, status, error,
+				 cv::Size(params.rescue_window_px, params.rescue_window_px), kRescueLevels - 1,
+				 cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 10, 0.03),
+				 cv::OPTFLOW_USE_INITIAL_FLOW);
+}
+
 /// Across which way the window (side `window`) around `at` is one-sided: the unit eigenvector of its structure
 /// tensor's larger eigenvalue when the smaller is under `ratio` of it (an edge, a streak), else (0, 0). From
 /// `derivatives`, a Lucas-Kanade pyramid's level (CV_16SC2).
@@ -265,11 +282,10 @@ cv::Point2f edge_across_in(const cv::Mat &derivatives, cv::Point2f at, int windo
 			syy += gy * gy;
 		}
 	}
-	const double mean = 0.5 * (sxx + syy), spread = std::hypot(0.5 * (sxx - syy), sxy);
-	if (!(mean + spread > 0) || mean - spread >= ratio * (mean + spread))
+	const std::optional<double> angle = edge_angle(sxx, sxy, syy, ratio);
+	if (!angle)
 		return {0, 0};
-	const double angle = 0.5 * std::atan2(2 * sxy, sxx - syy);
-	return {static_cast<float>(std::cos(angle)), static_cast<float>(std::sin(angle))};
+	return {static_cast<float>(std::cos(*angle)), static_cast<float>(std::sin(*angle))};
 }
 
 } // namespace
@@ -371,15 +387,11 @@ int rescue_matches(const FrameFeatures &prev, const FrameFeatures &cur, std::spa
 	}
 	if (lost.empty())
 		return 0;
-	const cv::Size window(params.rescue_window_px, params.rescue_window_px);
-	const cv::TermCriteria stop(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 10, 0.03);
 	std::vector<cv::Mat> prev_scratch, cur_scratch;
 	const std::vector<cv::Mat> &prev_pyramid = pyramid_of(prev, prev_scratch, params);
 	const std::vector<cv::Mat> &cur_pyramid = pyramid_of(cur, cur_scratch, params);
 	std::vector<uchar> status;
-	std::vector<float> error;
-	cv::calcOpticalFlowPyrLK(prev_pyramid, cur_pyramid, from, to, status, error, window, kRescueLevels - 1, stop,
-				 cv::OPTFLOW_USE_INITIAL_FLOW);
+	follow_by_lk(prev_pyramid, cur_pyramid, from, to, status, params);
 
 	// The nearest unmatched keypoint where each point landed.
 	const float radius = params.rescue_radius_px;
@@ -416,8 +428,7 @@ int rescue_matches(const FrameFeatures &prev, const FrameFeatures &cur, std::spa
 	// Followed back from where they landed, they must come home: a point that slid along an edge or onto
 	// another surface does not.
 	std::vector<cv::Point2f> home = back;
-	cv::calcOpticalFlowPyrLK(cur_pyramid, prev_pyramid, landed, back, status, error, window, kRescueLevels - 1,
-				 stop, cv::OPTFLOW_USE_INITIAL_FLOW);
+	follow_by_lk(cur_pyramid, prev_pyramid, landed, back, status, params);
 	const bool binary = binary_descriptors(prev, cur);
 	const cv::Mat prev_d = continuous(prev.descriptors);
 	const cv::Mat cur_d = continuous(cur.descriptors);
@@ -470,18 +481,13 @@ std::vector<FollowedPoint> follow_unmatched(const FrameFeatures &prev, const Fra
 	}
 	if (index.empty())
 		return {};
-	const cv::Size window(params.rescue_window_px, params.rescue_window_px);
-	const cv::TermCriteria stop(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 10, 0.03);
 	std::vector<cv::Mat> prev_scratch, cur_scratch;
 	const std::vector<cv::Mat> &prev_pyramid = pyramid_of(prev, prev_scratch, params);
 	const std::vector<cv::Mat> &cur_pyramid = pyramid_of(cur, cur_scratch, params);
 	std::vector<uchar> status, back_status;
-	std::vector<float> error;
-	cv::calcOpticalFlowPyrLK(prev_pyramid, cur_pyramid, from, to, status, error, window, kRescueLevels - 1, stop,
-				 cv::OPTFLOW_USE_INITIAL_FLOW);
+	follow_by_lk(prev_pyramid, cur_pyramid, from, to, status, params);
 	std::vector<cv::Point2f> back = from;
-	cv::calcOpticalFlowPyrLK(cur_pyramid, prev_pyramid, to, back, back_status, error, window, kRescueLevels - 1,
-				 stop, cv::OPTFLOW_USE_INITIAL_FLOW);
+	follow_by_lk(cur_pyramid, prev_pyramid, to, back, back_status, params);
 	const float back2 = params.rescue_back_px * params.rescue_back_px;
 	const auto inside = [&](cv::Point2f p) {
 		return p.x >= 0 && p.y >= 0 && p.x < static_cast<float>(cur.grey.cols) &&
