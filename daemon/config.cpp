@@ -862,6 +862,18 @@ const std::vector<Option> &options()
 			"never",
 			[](DaemonConfig &c) -> int & { return c.motion.groups.coast_frames; }, 0, 1000));
 		o.push_back(number(
+			"groups", "edge_coast_frames",
+			"tracks: a published group leaving the view sideways through the edge band (fast enough to "
+			"cross it in this many frames) is remembered and published on for up to this many frames while "
+			"half its predicted box is in the image (no longer than it had been published); 0: as any "
+			"group",
+			[](DaemonConfig &c) -> int & { return c.motion.groups.edge_coast_frames; }, 0, 1000));
+		o.push_back(number(
+			"groups", "edge_band_px",
+			"tracks: the band along the image's left and right edges where feature points give out (ORB "
+			"keeps no corner within 31 px), pixels",
+			[](DaemonConfig &c) -> double & { return c.motion.groups.edge_band_px; }, 0, 1000));
+		o.push_back(number(
 			"groups", "smoothing",
 			"tracks: weight of the new measurement in the metric velocity averages (after a running "
 			"mean over the first 1 / smoothing frames)",

@@ -113,19 +113,39 @@ cv::Rect2f extent_of(const std::vector<uint32_t> &members, const std::vector<Mot
 
 /// A group not found in this frame as published: where it was last published, moved on by its image
 /// velocity and (camera-frame) velocity for the frames it has been missed; no members of its own.
-TargetGroup coasted(const TrackedGroup &track, double dt_s)
+TargetGroup coasted(const TrackedGroup &track, double dt_s, cv::Size image)
 {
 	TargetGroup g = *track.published;
 	const double elapsed = dt_s * track.missed_frames;
 	const auto du = static_cast<float>(track.image_velocity_pxps.x * elapsed);
 	const auto dv = static_cast<float>(track.image_velocity_pxps.y * elapsed);
 	g.box_px = {g.box_px[0] + du, g.box_px[1] + dv, g.box_px[2] + du, g.box_px[3] + dv};
+	if (!image.empty()) { // the part still in view: box_px is in the left image
+		const auto w = static_cast<float>(image.width), h = static_cast<float>(image.height);
+		g.box_px = {std::clamp(g.box_px[0], 0.F, w), std::clamp(g.box_px[1], 0.F, h),
+			    std::clamp(g.box_px[2], 0.F, w), std::clamp(g.box_px[3], 0.F, h)};
+	}
 	if (g.position_m && g.velocity_mps)
 		for (size_t k = 0; k < 3; ++k)
 			(*g.position_m)[k] += (*g.velocity_mps)[k] * elapsed;
 	g.point_count = 0; // age_frames stays: the frames it was found in
 	g.missed_frames = track.missed_frames;
 	return g;
+}
+
+/// Whether a group's predicted `box`, moving `step` pixels a frame, leaves an `image` of that size sideways
+/// through the band along its left or right edge (band_px wide) where feature points give out: it lies in the
+/// band, at least half of it still in the image, and crosses the band within `frames`. Only sideways: a near mover's
+/// feet lie in the bottom band whenever it stands close, and movers stay on the ground.
+bool leaves_through_edge(const cv::Rect2f &box, cv::Point2f step, cv::Size image, double band_px, int frames)
+{
+	const float centre = box.x + 0.5F * box.width;
+	if (image.empty() || frames <= 0 || centre < 0 || centre > static_cast<float>(image.width))
+		return false;
+	const auto band = static_cast<float>(band_px);
+	const bool fast_enough = std::abs(step.x) * static_cast<float>(frames) >= band;
+	return fast_enough &&
+	       ((step.x < 0 && box.x < band) || (step.x > 0 && box.br().x > static_cast<float>(image.width) - band));
 }
 
 /// The groups' own tolerance: the dense flow's cells' or the feature points' (GroupParams).
@@ -808,20 +828,33 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 			out.group_of_point[i] = index;
 	}
 	// Groups not seen this frame are remembered a little while, so a short occlusion keeps the id; a
-	// published one is published on for coast_frames, where its velocities take it.
-	for (size_t t = 0; t < before.size(); ++t)
-		if (!track_taken[t] && before[t].missed_frames < params.max_missed_frames && !track_ended[t]) {
-			TrackedGroup kept = before[t];
-			++kept.missed_frames;
-			out.memory.groups.push_back(kept);
-			// No longer than it had been published for: a patch of flow noise that clustered for a frame
-			// or two is not carried on as long as a mover followed for a second.
-			if (kept.published && kept.missed_frames <= params.coast_frames &&
-			    kept.missed_frames <= kept.published->age_frames - params.min_age_frames) {
-				out.groups.push_back(coasted(kept, context.dt_s));
-				out.residuals.push_back(kept.residual);
-			}
+	// published one is published on for coast_frames, where its velocities take it; one leaving the view
+	// through the edge band for edge_coast_frames.
+	for (size_t t = 0; t < before.size(); ++t) {
+		if (track_taken[t] || track_ended[t])
+			continue;
+		const bool leaving =
+			before[t].published &&
+			leaves_through_edge(predicted[t].box,
+					    before[t].image_velocity_pxps * static_cast<float>(context.dt_s),
+					    context.image_size, params.edge_band_px, params.edge_coast_frames);
+		const int remembered = leaving ? std::max(params.max_missed_frames, params.edge_coast_frames)
+					       : params.max_missed_frames;
+		const int coasts =
+			leaving ? std::max(params.coast_frames, params.edge_coast_frames) : params.coast_frames;
+		if (before[t].missed_frames >= remembered)
+			continue;
+		TrackedGroup kept = before[t];
+		++kept.missed_frames;
+		out.memory.groups.push_back(kept);
+		// No longer than it had been published for: a patch of flow noise that clustered for a frame
+		// or two is not carried on as long as a mover followed for a second.
+		if (kept.published && kept.missed_frames <= coasts &&
+		    kept.missed_frames <= kept.published->age_frames - params.min_age_frames) {
+			out.groups.push_back(coasted(kept, context.dt_s, context.image_size));
+			out.residuals.push_back(kept.residual);
 		}
+	}
 	// Points inside a box moving with its group belong to it too (they may have missed the strong set).
 	join_groups(points, out, params, out.group_of_point);
 	return out;

@@ -59,6 +59,15 @@ struct GroupParams {
 	/// max_missed_frames, and no more frames than it had been published for), moved on by its velocities
 	/// and marked with missed_frames; 0: never.
 	int coast_frames = 2;
+	/// A published group leaving the view sideways through the band along the image's edge where feature
+	/// points give out (edge_band_px), fast enough to cross it in this many frames, is remembered and
+	/// coasted for up to this many frames (still no more than it had been published for) while at least
+	/// half its predicted box is in the image: its points vanish in the band before the mover leaves the
+	/// view. 0: as any other group.
+	int edge_coast_frames = 15;
+	/// The band along the left and right edges: ORB keeps no corner within 31 px of the image's edge (its
+	/// patch), and a corner needs a frame more to be matched and confirmed.
+	double edge_band_px = 40;
 	/// Weight of the new measurement in the velocity averages (after a running mean over the track's first
 	/// 1 / smoothing frames).
 	double smoothing = 0.2;
@@ -182,6 +191,7 @@ struct GroupMotionContext {
 	std::optional<geometry::Pose> curr_from_prev;
 	std::optional<geometry::Pose> world_from_curr;
 	std::optional<geometry::StereoRig> rig; ///< for disparities
+	cv::Size image_size;			///< the left image's, for the edge band; empty: unknown
 };
 
 struct GroupOutput {

@@ -614,6 +614,7 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 			context.world_from_curr = world_from_curr;
 		}
 		context.rig = params.rig;
+		context.image_size = frame.left.size();
 		GroupParams group_params = params.groups;
 		if (group_params.members == GroupMembers::Auto)
 			group_params.members = moved ? GroupMembers::Labels : GroupMembers::Flow;
