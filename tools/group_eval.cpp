@@ -211,6 +211,15 @@ void GroupScore::add(const FrameResult &result, const cv::Mat &mask, const std::
 			++separated_mover_views;
 			separated_movers_split += groups_on >= 2 ? 1 : 0;
 			separated_movers_missed += groups_on == 0 ? 1 : 0;
+			if (!mover.metric)
+				continue; // a pixels-only reference's ids are per frame
+			MoverCount &count = separated_by_mover[mover.id];
+			++count.views;
+			count.split += groups_on >= 2 ? 1 : 0;
+			if (groups_on == 0) {
+				++count.missed;
+				count.missed_frames.push_back(result.seq);
+			}
 		}
 	}
 	score_walking_labels(result, mask, movers, walking_labels);
@@ -326,6 +335,29 @@ std::string group_count_table(const std::string &name, const GroupScore &s)
 	    << s.separated_mover_views << " | " << ratio(s.separated_movers_split, s.separated_mover_views) << " | "
 	    << ratio(s.separated_movers_missed, s.separated_mover_views) << " | " << s.separated_groups << " | "
 	    << ratio(s.separated_groups_off, s.separated_groups) << " |\n";
+	return out.str();
+}
+
+std::string group_mover_table(const GroupScore &s)
+{
+	std::ostringstream out;
+	out << "| mover (mask id) | separated views | missed | split | frames missed |\n";
+	out << "|---|---|---|---|---|\n";
+	for (const auto &[id, count] : s.separated_by_mover) {
+		out << "| " << id << " | " << count.views << " | " << count.missed << " | " << count.split << " | ";
+		// Runs of consecutive frames as ranges: a mover missed while it enters is one run, not ten numbers.
+		const auto &f = count.missed_frames;
+		for (size_t i = 0; i < f.size();) {
+			size_t j = i;
+			while (j + 1 < f.size() && f[j + 1] == f[j] + 1)
+				++j;
+			out << (i > 0 ? ", " : "") << f[i];
+			if (j > i)
+				out << "-" << f[j];
+			i = j + 1;
+		}
+		out << " |\n";
+	}
 	return out.str();
 }
 

@@ -61,6 +61,13 @@ struct GroupScore {
 	uint64_t count_over = 0, count_under = 0;
 	uint64_t separated_mover_views = 0, separated_movers_split = 0, separated_movers_missed = 0;
 	uint64_t separated_groups = 0, separated_groups_off = 0;
+	/// The same per mover of a reference with ids that hold across frames (TrueMover::metric): which mover
+	/// the count lacks, and in which frames (group_mover_table).
+	struct MoverCount {
+		uint64_t views = 0, missed = 0, split = 0;
+		std::vector<uint64_t> missed_frames; ///< seq, in order
+	};
+	std::map<int, MoverCount> separated_by_mover;
 	uint64_t frames_without_movers = 0;
 	uint64_t groups_without_movers = 0; ///< groups in frames where no mover is in view
 	uint64_t groups = 0;
@@ -100,5 +107,7 @@ std::string group_score_table(const std::string &name, const GroupScore &score);
 /// The second table: in the separated frames, how the count goes wrong (too many / too few groups, movers
 /// split or missed, groups off every mover).
 std::string group_count_table(const std::string &name, const GroupScore &score);
+/// The third: the same per mover, with the frames each was missed in as ranges ("3-9, 81").
+std::string group_mover_table(const GroupScore &score);
 
 } // namespace stereod::tools

@@ -282,8 +282,11 @@ int eval_groups(const std::string &results_path, const std::string &truth_dir, c
 			  << "\n";
 	} else {
 		std::cout << "\n" << tools::group_score_table(name, score);
-		if (count_detail)
+		if (count_detail) {
 			std::cout << "\n" << tools::group_count_table(name, score);
+			if (!score.separated_by_mover.empty())
+				std::cout << "\n" << tools::group_mover_table(score);
+		}
 	}
 	return 0;
 }
@@ -679,7 +682,8 @@ int main(int argc, char **argv)
 		->capture_default_str();
 	eval_cmd->add_flag("--count-detail", eval_count_detail,
 			   "with --groups: a second table of how the count goes wrong in the separated frames (too "
-			   "many / too few groups, movers split or missed, groups on no mover)");
+			   "many / too few groups, movers split or missed, groups on no mover) and, where the truth's "
+			   "mover ids hold across frames, a third per mover with the frames it was missed in");
 
 	auto *render_cmd = app.add_subcommand("render", "draw results onto the input's frames");
 	tools::SourceOptions render_opts;

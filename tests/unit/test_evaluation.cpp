@@ -218,10 +218,12 @@ TEST(GroupEvaluation, HandComputedFrames)
 	tools::GroupScore score;
 	FrameResult frame;
 	// Frame 1: one group on mover 1, 10% fast, heading 10 deg off, centroid 0.3 m off; one on the background.
+	frame.seq = 1;
 	frame.groups = {group_at(7, {98, 48, 44, 104}, 1.65, (90 + 10) * CV_PI / 180, {-1, 0, 5.3}),
 			group_at(8, {400, 10, 30, 30}, 1.0, 0.0, {3, 0, 8})};
 	score.add(frame, mask, movers);
 	// Frame 2: both movers covered, mover 1 under another id (a switch), speeds exact.
+	frame.seq = 2;
 	frame.groups = {group_at(9, {100, 50, 40, 100}, 1.5, CV_PI / 2, {-1, 0, 5}),
 			group_at(10, {300, 60, 40, 100}, 1.0, 0.0, {1, 0, 6})};
 	score.add(frame, mask, movers);
@@ -242,6 +244,25 @@ TEST(GroupEvaluation, HandComputedFrames)
 	EXPECT_NEAR(score.heading_error_deg[0], 10.0, 1e-4);
 	EXPECT_NEAR(score.centroid_error_m[0], 0.3, 1e-6);
 	EXPECT_NEAR(tools::fraction_below(score.heading_error_deg, 15), 1.0, 1e-12);
+
+	// Per mover (--count-detail's third table): frames 3-5 and 7 with mover 2 missed, 6 with both found;
+	// mover 2's missed frames come out as runs.
+	const auto mover_1_only = std::vector<TargetGroup>{group_at(9, {100, 50, 40, 100}, 1.5, CV_PI / 2, {-1, 0, 5})};
+	for (const uint64_t seq : {3, 4, 5, 6, 7}) {
+		frame.seq = seq;
+		if (seq == 6)
+			frame.groups.push_back(group_at(10, {300, 60, 40, 100}, 1.0, 0.0, {1, 0, 6}));
+		else
+			frame.groups = mover_1_only;
+		score.add(frame, mask, movers);
+	}
+	ASSERT_EQ(score.separated_by_mover.size(), 2U);
+	EXPECT_EQ(score.separated_by_mover[1].views, 7U);
+	EXPECT_EQ(score.separated_by_mover[1].missed, 0U);
+	EXPECT_EQ(score.separated_by_mover[2].missed, 5U);
+	EXPECT_EQ(score.separated_by_mover[2].missed_frames, (std::vector<uint64_t>{1, 3, 4, 5, 7}));
+	EXPECT_NE(tools::group_mover_table(score).find("| 2 | 7 | 5 | 0 | 1, 3-5, 7 |"), std::string::npos)
+		<< tools::group_mover_table(score);
 }
 
 // The still-camera reference (tools/motion_reference.hpp): the median of samples is the empty scene even
