@@ -166,11 +166,18 @@ cv::Vec3f at_depth(cv::Point2f px, float z, const geometry::StereoRig &rig)
 	return {static_cast<float>((px.x - rig.cx) * z / rig.fx), static_cast<float>((px.y - rig.cy) * z / rig.fy), z};
 }
 
-/// Frames 0.1 s apart through `rig`.
-GroupMotionContext through(const geometry::StereoRig &rig)
+/// Frames 0.1 s apart, nothing else known (no rig, no pose, no image size).
+GroupMotionContext tenth_of_a_second()
 {
 	GroupMotionContext context;
 	context.dt_s = 0.1;
+	return context;
+}
+
+/// Frames 0.1 s apart through `rig`.
+GroupMotionContext through(const geometry::StereoRig &rig)
+{
+	GroupMotionContext context = tenth_of_a_second();
 	context.rig = rig;
 	return context;
 }
@@ -188,9 +195,7 @@ GroupOutput second_of_two(const std::vector<MotionPoint> &points, const GroupPar
 /// The same, frames 0.1 s apart without a rig.
 GroupOutput second_of_two(const std::vector<MotionPoint> &points, const GroupParams &params)
 {
-	GroupMotionContext context;
-	context.dt_s = 0.1;
-	return second_of_two(points, params, context);
+	return second_of_two(points, params, tenth_of_a_second());
 }
 
 /// `count` points of a still background spread over a 640x480 frame: what a pose-explained scene leaves,
@@ -239,8 +244,7 @@ TEST(Groups, IdsSurviveTwoGroupsCrossing)
 	GroupParams params;
 	AffinityPropagation workspace;
 	GroupMemory memory;
-	GroupMotionContext context;
-	context.dt_s = 0.1;
+	GroupMotionContext context = tenth_of_a_second();
 	int id_a = 0, id_b = 0;
 	// 70 frames: A from x=100 to 520, B from 540 to 120; they pass each other around frame 37.
 	for (int frame = 0; frame < 70; ++frame) {
@@ -280,8 +284,7 @@ TEST(Groups, WorldVelocityIsARunningMeanThenAnAverage)
 	GroupParams params; // smoothing 0.2: a running mean over the first 5 frames
 	AffinityPropagation workspace;
 	GroupMemory memory;
-	GroupMotionContext context;
-	context.dt_s = 0.1;
+	GroupMotionContext context = tenth_of_a_second();
 	context.curr_from_prev = geometry::Pose{};
 	context.world_from_curr = geometry::Pose{};
 	for (int frame = 0; frame < 30; ++frame) {
@@ -320,8 +323,7 @@ TEST(Groups, AMissedGroupCoastsOnItsVelocityKeepingItsId)
 	GroupParams params; // coast_frames 2, max_missed_frames 3
 	AffinityPropagation workspace;
 	GroupMemory memory;
-	GroupMotionContext context;
-	context.dt_s = 0.1;
+	GroupMotionContext context = tenth_of_a_second();
 	int id = 0;
 	std::array<float, 4> last_box{};
 	for (int frame = 0; frame < 11; ++frame) {
@@ -372,8 +374,7 @@ TEST(Groups, AGroupLeavingThroughTheEdgeBandCoastsOutOfView)
 		GroupParams params; // edge_band_px 40, edge_coast_frames 15
 		AffinityPropagation workspace;
 		GroupMemory memory;
-		GroupMotionContext context;
-		context.dt_s = 0.1;
+		GroupMotionContext context = tenth_of_a_second();
 		if (size_known)
 			context.image_size = {640, 480};
 		int id = 0, last_seen = -1, coasted = 0;
@@ -432,8 +433,7 @@ TEST(Groups, AMoverSeenFirstInPartThenWholeKeepsItsId)
 		params.affinity.preference_scale = 2;
 		AffinityPropagation workspace;
 		GroupMemory memory;
-		GroupMotionContext context;
-		context.dt_s = 0.1;
+		GroupMotionContext context = tenth_of_a_second();
 		int id = 0;
 		for (int frame = 0; frame < 6; ++frame) {
 			const bool whole = frame >= 3;
@@ -487,8 +487,7 @@ TEST(Groups, TwoTracksOnOneMoverEndAsOne)
 		GroupParams params;
 		AffinityPropagation workspace;
 		GroupMemory memory;
-		GroupMotionContext context;
-		context.dt_s = 0.1;
+		GroupMotionContext context = tenth_of_a_second();
 		std::set<int> piece_ids;
 		for (int frame = 0; frame < 8; ++frame) {
 			const bool whole = frame >= 4;
@@ -545,8 +544,7 @@ TEST(Groups, ANoiseGroupSeenBrieflyDoesNotCoast)
 	GroupParams params;
 	AffinityPropagation workspace;
 	GroupMemory memory;
-	GroupMotionContext context;
-	context.dt_s = 0.1;
+	GroupMotionContext context = tenth_of_a_second();
 	for (int frame = 0; frame < 4; ++frame) {
 		auto points = crossing_frame(frame, rng);
 		points.resize(frame < params.min_age_frames ? 140 : 120);
@@ -585,7 +583,7 @@ TEST(Groups, ASlowMoverIsFoundWhereTheSceneIsQuiet)
 					points.push_back(p);
 				}
 				const GroupOutput out = find_groups(points, frame == 0 ? nullptr : &memory,
-								    {0.1, {}, {}, {}, {}}, params, workspace);
+								    tenth_of_a_second(), params, workspace);
 				memory = out.memory;
 				if (frame == 0)
 					continue;
@@ -625,7 +623,7 @@ TEST(Groups, AWalkersFeaturePointsOffByAPyramidStepStayInItsGroup)
 				p.residual = p.flow = {1.2F + off, 0.F};
 				points.push_back(p);
 			}
-			out = find_groups(points, frame == 0 ? nullptr : &memory, {0.1, {}, {}, {}, {}}, params,
+			out = find_groups(points, frame == 0 ? nullptr : &memory, tenth_of_a_second(), params,
 					  workspace);
 			memory = out.memory;
 		}
@@ -648,14 +646,14 @@ TEST(Groups, StillSceneHasNoGroup)
 	GroupMemory memory;
 	for (int frame = 0; frame < 5; ++frame) {
 		const GroupOutput out =
-			find_groups(points, frame == 0 ? nullptr : &memory, {0.1, {}, {}, {}, {}}, {}, workspace);
+			find_groups(points, frame == 0 ? nullptr : &memory, tenth_of_a_second(), {}, workspace);
 		memory = out.memory;
 		EXPECT_TRUE(out.groups.empty());
 		// sigma 0.3 px: one point in ~250 is 1 px off by chance; alone it makes no group
 		EXPECT_LE(out.strong.size(), 4u) << "noise under min_flow_px is not strong motion";
 	}
 	// Nothing to cluster: no clustering time is reported (rather than a 0 that reads as a fast clustering).
-	EXPECT_FALSE(find_groups({}, nullptr, {0.1, {}, {}, {}, {}}, {}, workspace).clustering_ms.has_value());
+	EXPECT_FALSE(find_groups({}, nullptr, tenth_of_a_second(), {}, workspace).clustering_ms.has_value());
 }
 
 TEST(Groups, LabelMembersAreTheDynamicPointsWithAResidual)
@@ -686,8 +684,7 @@ TEST(Groups, AGroupThatMovedOnlyAlongItsEdgesIsDropped)
 		GroupParams params;
 		AffinityPropagation workspace;
 		GroupMemory memory;
-		GroupMotionContext context;
-		context.dt_s = 0.1;
+		GroupMotionContext context = tenth_of_a_second();
 		std::vector<TargetGroup> groups;
 		for (int frame = 0; frame < 4; ++frame) {
 			auto points = crossing_frame(frame, rng);
@@ -931,8 +928,7 @@ TEST(Groups, MonocularMoversApartWhoMoveAlikeAreCutApart)
 			GroupParams params;
 			params.members = GroupMembers::Labels;
 			params.split_gap_px = gap;
-			GroupMotionContext context;
-			context.dt_s = 0.1;
+			GroupMotionContext context = tenth_of_a_second();
 			if (with_depth)
 				context.rig = rig;
 			const GroupOutput out = second_of_two(points, params, context);
