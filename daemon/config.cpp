@@ -881,6 +881,12 @@ const std::vector<Option> &options()
 		o.push_back(number(
 			"groups", "image_smoothing", "tracks: the same for the image velocity that predicts the box",
 			[](DaemonConfig &c) -> double & { return c.motion.groups.image_smoothing; }, 0.01, 1));
+		o.push_back(number(
+			"groups", "velocity_window_s",
+			"tracks: the metric velocities' component along the line of sight from a line fitted to the "
+			"track's world positions over this many seconds (the depth's frame-to-frame noise averages "
+			"out); 0: the averages alone",
+			[](DaemonConfig &c) -> double & { return c.motion.groups.velocity_window_s; }, 0, 60));
 		o.push_back(boolean("groups", "label_points", "label points inside a group moving with it dynamic",
 				    [](DaemonConfig &c) -> bool & { return c.motion.groups.label_points; }));
 		o.push_back(number(

@@ -271,8 +271,11 @@ void GroupScore::add(const FrameResult &result, const cv::Mat &mask, const std::
 			centroid_error_m.push_back(cv::norm(cv::Vec3d(p[0], p[1], p[2]) - mover.position_m));
 		}
 		const double true_speed = cv::norm(mover.world_velocity_mps);
-		if (best->speed_mps && true_speed > 1e-6)
-			speed_relative_error.push_back(std::abs(*best->speed_mps - true_speed) / true_speed);
+		if (best->speed_mps && true_speed > 1e-6) {
+			const double error = std::abs(*best->speed_mps - true_speed) / true_speed;
+			speed_relative_error.push_back(error);
+			separated_by_mover[mover.id].speed_relative_error.push_back(error);
+		}
 		const cv::Vec3d &v = mover.world_velocity_mps;
 		const double ground_speed = std::hypot(v[0], v[2]);
 		if (best->heading_rad && ground_speed >= min_heading_speed_mps &&
@@ -341,10 +344,13 @@ std::string group_count_table(const std::string &name, const GroupScore &s)
 std::string group_mover_table(const GroupScore &s)
 {
 	std::ostringstream out;
-	out << "| mover (mask id) | separated views | missed | split | frames missed |\n";
-	out << "|---|---|---|---|---|\n";
+	out << std::setprecision(3);
+	out << "| mover (mask id) | separated views | missed | split | speed error (median, all views) | frames missed "
+	       "|\n";
+	out << "|---|---|---|---|---|---|\n";
 	for (const auto &[id, count] : s.separated_by_mover) {
-		out << "| " << id << " | " << count.views << " | " << count.missed << " | " << count.split << " | ";
+		out << "| " << id << " | " << count.views << " | " << count.missed << " | " << count.split << " | "
+		    << median(count.speed_relative_error) << " | ";
 		// Runs of consecutive frames as ranges: a mover missed while it enters is one run, not ten numbers.
 		const auto &f = count.missed_frames;
 		for (size_t i = 0; i < f.size();) {

@@ -66,6 +66,8 @@ struct GroupScore {
 	struct MoverCount {
 		uint64_t views = 0, missed = 0, split = 0;
 		std::vector<uint64_t> missed_frames; ///< seq, in order
+		/// Over every view a group covers the mover (separated or not): the relative speed error.
+		std::vector<double> speed_relative_error;
 	};
 	std::map<int, MoverCount> separated_by_mover;
 	uint64_t frames_without_movers = 0;

@@ -608,6 +608,79 @@ double residual_noise_px(const std::vector<MotionPoint> &points)
 
 } // namespace
 
+void PositionHistory::push(const Entry &entry)
+{
+	entries[next] = entry;
+	next = (next + 1) % kCapacity;
+	size = std::min(size + 1, kCapacity);
+}
+
+const PositionHistory::Entry &PositionHistory::newest(size_t i) const
+{
+	return entries[(next + kCapacity - 1 - i) % kCapacity];
+}
+
+std::optional<double> velocity_along(const PositionHistory &history, double window_s, const cv::Vec3d &ray)
+{
+	if (history.size == 0 || window_s <= 0)
+		return std::nullopt;
+	const double t_end = history.newest(0).t_s;
+	size_t n = 0, measured = 0;
+	double mean_t = 0, mean_p = 0, mean_v = 0;
+	for (; n < history.size && t_end - history.newest(n).t_s <= window_s; ++n) {
+		const auto &e = history.newest(n);
+		mean_t += e.t_s;
+		mean_p += e.world.dot(ray);
+		if (e.measured_velocity) {
+			mean_v += e.measured_velocity->dot(ray);
+			++measured;
+		}
+	}
+	constexpr size_t kFewest = 4;
+	if (n < kFewest || measured < kFewest || t_end - history.newest(n - 1).t_s < 0.5 * window_s)
+		return std::nullopt;
+	mean_t /= static_cast<double>(n);
+	mean_p /= static_cast<double>(n);
+	mean_v /= static_cast<double>(measured);
+	double stt = 0, stp = 0, spread_v = 0;
+	for (size_t i = 0; i < n; ++i) {
+		const auto &e = history.newest(i);
+		stt += (e.t_s - mean_t) * (e.t_s - mean_t);
+		stp += (e.t_s - mean_t) * (e.world.dot(ray) - mean_p);
+		if (e.measured_velocity)
+			spread_v += (e.measured_velocity->dot(ray) - mean_v) * (e.measured_velocity->dot(ray) - mean_v);
+	}
+	if (stt <= 0)
+		return std::nullopt;
+	const double slope = stp / stt;
+	double residuals = 0;
+	for (size_t i = 0; i < n; ++i) {
+		const auto &e = history.newest(i);
+		const double r = e.world.dot(ray) - mean_p - slope * (e.t_s - mean_t);
+		residuals += r * r;
+	}
+	const double slope_variance = residuals / static_cast<double>(n - 2) / stt;
+	const double mean_variance = spread_v / static_cast<double>(measured - 1) / static_cast<double>(measured);
+	if (!std::isfinite(slope_variance) || !std::isfinite(mean_variance))
+		return std::nullopt;
+	// A measure without spread is exact and wins outright (constructed data; both: their mean).
+	if (slope_variance <= 0 || mean_variance <= 0)
+		return slope_variance <= 0 && mean_variance <= 0 ? (slope + mean_v) / 2
+								  : (slope_variance <= 0 ? slope : mean_v);
+	return (slope / slope_variance + mean_v / mean_variance) / (1 / slope_variance + 1 / mean_variance);
+}
+
+namespace {
+
+/// `smoothed` with its component along `ray` (the line of sight in the world, unit length) replaced by
+/// `along`.
+cv::Vec3d along_sight_from(const cv::Vec3d &smoothed, double along, const cv::Vec3d &ray)
+{
+	return smoothed + (along - smoothed.dot(ray)) * ray;
+}
+
+} // namespace
+
 GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemory *previous,
 			const GroupMotionContext &context, const GroupParams &given, AffinityPropagation &workspace,
 			const std::vector<uint32_t> *strong)
@@ -797,6 +870,28 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 			g.world_velocity_mps = blend(old != nullptr ? old->world_velocity_mps : std::nullopt,
 						     *cluster.world_velocity, weight);
 		g.residual = cluster.residual;
+		g.clock_s = old != nullptr ? old->clock_s + context.dt_s * (1 + old->missed_frames) : 0;
+		if (old != nullptr)
+			g.positions = old->positions;
+		// Published: the averaged velocities with their component along the line of sight from the track's
+		// fitted positions (GroupParams::velocity_window_s), where it has them.
+		std::optional<cv::Vec3d> world_velocity = g.world_velocity_mps, velocity = g.velocity_mps;
+		if (cluster.position && context.world_from_curr && cv::norm(*cluster.position) > 0) {
+			g.positions.push(
+				{g.clock_s, *context.world_from_curr * *cluster.position, cluster.world_velocity});
+			const cv::Vec3d ray =
+				context.world_from_curr->r * (*cluster.position / cv::norm(*cluster.position));
+			const auto along = velocity_along(g.positions, params.velocity_window_s, ray);
+			if (along && world_velocity) {
+				const cv::Vec3d fused = along_sight_from(*world_velocity, *along, ray);
+				// The camera-frame velocity is the mover's own plus the static scene's apparent one, so
+				// it changes by as much.
+				if (velocity)
+					velocity =
+						*velocity + context.world_from_curr->r.t() * (fused - *world_velocity);
+				world_velocity = fused;
+			}
+		}
 		if (g.age_frames < params.min_age_frames) {
 			out.memory.groups.push_back(g);
 			continue;
@@ -811,10 +906,10 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 			published.position_m = array_of(*cluster.position);
 		if (cluster.extent)
 			published.extent_m = array_of(*cluster.extent);
-		if (g.velocity_mps)
-			published.velocity_mps = array_of(*g.velocity_mps);
-		if (g.world_velocity_mps) {
-			const cv::Vec3d &w = *g.world_velocity_mps;
+		if (velocity)
+			published.velocity_mps = array_of(*velocity);
+		if (world_velocity) {
+			const cv::Vec3d &w = *world_velocity;
 			published.world_velocity_mps = array_of(w);
 			published.speed_mps = cv::norm(w);
 			published.heading_rad = std::atan2(w[0], w[2]);

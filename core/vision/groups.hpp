@@ -3,6 +3,7 @@
 // explain, split from the rest by the seed's mean-flow thresholds, clustered by Affinity Propagation on the
 // seed's 6-d samples, and followed from frame to frame as groups with a stable id, a box, and, where depth
 // exists, a 3D position, extent and velocity.
+#include <array>
 #include <cstdint>
 #include <optional>
 #include <span>
@@ -72,6 +73,13 @@ struct GroupParams {
 	/// 1 / smoothing frames).
 	double smoothing = 0.2;
 	double image_smoothing = 0.5; ///< the same for the image velocity (the tracks' prediction)
+	/// The metric velocities' component along the line of sight comes from a straight line fitted to the
+	/// track's world positions (its members' median) over the last this many seconds, once they span half of
+	/// it: a point's depth change from one frame to the next is its disparity noise times Z^2 / (f b), which
+	/// at 9 m and 30 fps is metres per second, while the median position over a window averages it down. Across
+	/// the line of sight the points' own image motion stays far the better measure. 0: the averages alone
+	/// (docs/groups.md, stop 49).
+	double velocity_window_s = 0.5;
 	/// Labels: a point inside a published group's box whose residual agrees with the group's (within the
 	/// larger of this and half the group's residual) becomes dynamic. 2 px: a keypoint's position is
 	/// quantised to its pyramid level, so a slow walker's own residual is off the group's by a pixel or two
@@ -164,6 +172,31 @@ struct MotionPoint {
 	cv::Point2f across{0, 0};
 };
 
+/// A track's world positions (its members' median, where depth and the pose exist) at the track's own clock,
+/// newest last; a fixed ring so that following a group allocates nothing.
+struct PositionHistory {
+	static constexpr size_t kCapacity = 64;
+	struct Entry {
+		double t_s = 0;
+		cv::Vec3d world;
+		/// The members' median own velocity measured in that frame (world frame), where there was one.
+		std::optional<cv::Vec3d> measured_velocity;
+	};
+	std::array<Entry, kCapacity> entries{};
+	size_t size = 0, next = 0;
+
+	void push(const Entry &entry);
+	/// The i-th newest (0: the newest); i < size.
+	[[nodiscard]] const Entry &newest(size_t i) const;
+};
+
+/// The velocity along `ray` (a unit vector, the line of sight) over the entries of the last `window_s` before
+/// the newest, from two measures weighted by the inverse of their variances: the slope of the least-squares
+/// line through the positions (its variance from the line's residuals), and the mean of the measured
+/// velocities (its variance from their spread). nullopt when either has fewer than 4 entries, the positions
+/// span less than half the window, or a variance is not positive.
+std::optional<double> velocity_along(const PositionHistory &history, double window_s, const cv::Vec3d &ray);
+
 /// A group followed across frames.
 struct TrackedGroup {
 	int id = 0;
@@ -174,6 +207,8 @@ struct TrackedGroup {
 	cv::Point2f image_velocity_pxps;
 	std::optional<cv::Vec3d> world_velocity_mps;
 	std::optional<cv::Vec3d> velocity_mps;
+	double clock_s = 0; ///< seconds since the track began, at its last observation
+	PositionHistory positions;
 	/// As last published (found in a frame and old enough), for coasting; and the members' median residual
 	/// then, for the points joining a coasted group.
 	std::optional<TargetGroup> published;

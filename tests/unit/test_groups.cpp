@@ -281,7 +281,8 @@ TEST(Groups, WorldVelocityIsARunningMeanThenAnAverage)
 	// Group A of the crossing scene alone, 5 m away, with a depth that says 1.0 m/s to the right give or take
 	// 0.4 m/s, alternating frame by frame (measurement noise); the camera stands still.
 	std::mt19937 rng(5);
-	GroupParams params; // smoothing 0.2: a running mean over the first 5 frames
+	GroupParams params;	      // smoothing 0.2: a running mean over the first 5 frames
+	params.velocity_window_s = 0; // the averages alone (the positions here do not follow the velocities)
 	AffinityPropagation workspace;
 	GroupMemory memory;
 	GroupMotionContext context = tenth_of_a_second();
@@ -313,6 +314,96 @@ TEST(Groups, WorldVelocityIsARunningMeanThenAnAverage)
 			EXPECT_NEAR(vx, 1.0, 0.08) << "frame " << frame;
 		}
 	}
+}
+
+TEST(Groups, VelocityAlongASightLineWeighsTheFittedSlopeAndTheMeasuredMeanByTheirSpread)
+{
+	// A mover closing along z at 1.5 m/s, seen every 0.1 s for a second; the sight line is z.
+	const cv::Vec3d ray(0, 0, 1);
+	const auto history = [](double position_noise_m, double measured_mps, double measured_noise_mps) {
+		PositionHistory h;
+		for (int k = 0; k < 11; ++k) {
+			const double sign = k % 2 == 0 ? 1 : -1;
+			const double t = 0.1 * k;
+			h.push({t, cv::Vec3d(0.2, 0, 9 - 1.5 * t + sign * position_noise_m),
+				cv::Vec3d(0, 0, measured_mps + sign * measured_noise_mps)});
+		}
+		return h;
+	};
+	// Steady positions (2 cm) and frame-to-frame velocities that swing by 2 m/s: the slope wins.
+	const auto steady = velocity_along(history(0.02, -1.5, 2.0), 0.5, ray);
+	ASSERT_TRUE(steady.has_value());
+	EXPECT_NEAR(*steady, -1.5, 0.05);
+	// Positions that jump by 30 cm and measured velocities of -1.2 give or take 1 cm/s: the mean wins.
+	const auto jumpy = velocity_along(history(0.3, -1.2, 0.01), 0.5, ray);
+	ASSERT_TRUE(jumpy.has_value());
+	EXPECT_NEAR(*jumpy, -1.2, 0.01);
+	// Equal spreads land between the two (both unbiased here, so on the truth).
+	const auto both = velocity_along(history(0.05, -1.5, 0.5), 0.5, ray);
+	ASSERT_TRUE(both.has_value());
+	EXPECT_NEAR(*both, -1.5, 0.1);
+	// Across the sight line both say x stood still, without spread: exact.
+	const auto across = velocity_along(history(0.02, -1.5, 2.0), 0.5, cv::Vec3d(1, 0, 0));
+	ASSERT_TRUE(across.has_value());
+	EXPECT_NEAR(*across, 0, 1e-9);
+	// Too short a span (0.2 s of a 0.5 s window), or no window: nothing.
+	PositionHistory short_one;
+	for (int k = 0; k < 3; ++k)
+		short_one.push({0.1 * k, cv::Vec3d(0, 0, 9 - 0.15 * k), cv::Vec3d(0, 0, -1.5)});
+	EXPECT_FALSE(velocity_along(short_one, 0.5, ray).has_value());
+	EXPECT_FALSE(velocity_along(history(0.02, -1.5, 2.0), 0, ray).has_value());
+	// The ring keeps its newest kCapacity entries.
+	PositionHistory full;
+	for (size_t k = 0; k < PositionHistory::kCapacity + 5; ++k)
+		full.push({static_cast<double>(k), cv::Vec3d(0, 0, 0), std::nullopt});
+	EXPECT_EQ(full.size, PositionHistory::kCapacity);
+	EXPECT_EQ(full.newest(0).t_s, static_cast<double>(PositionHistory::kCapacity + 4));
+	EXPECT_EQ(full.newest(PositionHistory::kCapacity - 1).t_s, 5.0);
+}
+
+TEST(Groups, AMoverAlongTheSightLineTakesItsSpeedFromItsPositions)
+{
+	// Group A of the crossing scene, but straight ahead and closing along z from 9 m at 1.5 m/s: its members'
+	// depth changes from one frame to the next say 1.5 m/s give or take 2 m/s (the disparity's noise at
+	// that range), alternating, while their median position follows the truth within 2 cm.
+	const auto published_speeds = [](double window_s) {
+		std::mt19937 rng(5);
+		GroupParams params;
+		params.velocity_window_s = window_s;
+		AffinityPropagation workspace;
+		GroupMemory memory;
+		GroupMotionContext context = tenth_of_a_second();
+		context.curr_from_prev = geometry::Pose{};
+		context.world_from_curr = geometry::Pose{};
+		std::vector<double> speeds;
+		for (int frame = 0; frame < 30; ++frame) {
+			auto points = crossing_frame(frame, rng);
+			points.resize(140);
+			const double sign = frame % 2 == 0 ? 1 : -1;
+			const double z = 9 - 1.5 * 0.1 * frame + 0.02 * sign, measured = -1.5 + 2.0 * sign;
+			for (size_t i = 120; i < points.size(); ++i) {
+				const cv::Vec3f now(0.01F * (static_cast<float>(i) - 130), 0, static_cast<float>(z));
+				points[i].xyz = now;
+				points[i].prev_xyz = now - cv::Vec3f(0, 0, static_cast<float>(measured * context.dt_s));
+			}
+			GroupOutput out =
+				find_groups(points, frame == 0 ? nullptr : &memory, context, params, workspace);
+			memory = out.memory;
+			if (frame >= 10 && out.groups.size() == 1 && out.groups[0].speed_mps)
+				speeds.push_back(*out.groups[0].speed_mps);
+		}
+		return speeds;
+	};
+	const auto fitted = published_speeds(0.5);
+	ASSERT_EQ(fitted.size(), 20U);
+	for (const double speed : fitted)
+		EXPECT_NEAR(speed, 1.5, 0.1);
+	// The averages alone swing by 2.0 * 0.2 / 1.8 = 0.22 m/s about the truth.
+	const auto averaged = published_speeds(0);
+	ASSERT_EQ(averaged.size(), 20U);
+	EXPECT_GT(*std::max_element(averaged.begin(), averaged.end()) -
+			  *std::min_element(averaged.begin(), averaged.end()),
+		  0.3);
 }
 
 TEST(Groups, AMissedGroupCoastsOnItsVelocityKeepingItsId)
