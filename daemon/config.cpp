@@ -874,6 +874,11 @@ const std::vector<Option> &options()
 			"keeps no corner within 31 px), pixels",
 			[](DaemonConfig &c) -> double & { return c.motion.groups.edge_band_px; }, 0, 1000));
 		o.push_back(number(
+			"groups", "occlusion_frames",
+			"tracks: a published group not found whose predicted box lies at least half behind a nearer "
+			"group found in the frame is remembered (unpublished) this many frames; 0: as any group",
+			[](DaemonConfig &c) -> int & { return c.motion.groups.occlusion_frames; }, 0, 1000));
+		o.push_back(number(
 			"groups", "smoothing",
 			"tracks: weight of the new measurement in the metric velocity averages (after a running "
 			"mean over the first 1 / smoothing frames)",

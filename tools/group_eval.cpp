@@ -263,8 +263,10 @@ void GroupScore::add(const FrameResult &result, const cv::Mat &mask, const std::
 		if (!mover.metric)
 			continue;
 		if (const auto it = last_group_of_mover.find(mover.id);
-		    it != last_group_of_mover.end() && it->second != best->id)
+		    it != last_group_of_mover.end() && it->second != best->id) {
 			++id_switches;
+			separated_by_mover[mover.id].id_switch_frames.push_back(result.seq);
+		}
 		last_group_of_mover[mover.id] = best->id;
 		if (best->position_m) {
 			const auto &p = *best->position_m;
@@ -341,27 +343,40 @@ std::string group_count_table(const std::string &name, const GroupScore &s)
 	return out.str();
 }
 
+namespace {
+
+/// Frame numbers (in order) with runs of consecutive ones as ranges: a mover missed while it enters is one
+/// run, not ten numbers.
+std::string as_runs(const std::vector<uint64_t> &f)
+{
+	std::ostringstream out;
+	for (size_t i = 0; i < f.size();) {
+		size_t j = i;
+		while (j + 1 < f.size() && f[j + 1] == f[j] + 1)
+			++j;
+		out << (i > 0 ? ", " : "") << f[i];
+		if (j > i)
+			out << "-" << f[j];
+		i = j + 1;
+	}
+	return out.str();
+}
+
+} // namespace
+
 std::string group_mover_table(const GroupScore &s)
 {
 	std::ostringstream out;
 	out << std::setprecision(3);
 	out << "| mover (mask id) | separated views | missed | split | speed error (median, all views) | frames missed "
-	       "|\n";
-	out << "|---|---|---|---|---|---|\n";
+	       "| id switches (frames) |\n";
+	out << "|---|---|---|---|---|---|---|\n";
 	for (const auto &[id, count] : s.separated_by_mover) {
 		out << "| " << id << " | " << count.views << " | " << count.missed << " | " << count.split << " | "
 		    << median(count.speed_relative_error) << " | ";
-		// Runs of consecutive frames as ranges: a mover missed while it enters is one run, not ten numbers.
-		const auto &f = count.missed_frames;
-		for (size_t i = 0; i < f.size();) {
-			size_t j = i;
-			while (j + 1 < f.size() && f[j + 1] == f[j] + 1)
-				++j;
-			out << (i > 0 ? ", " : "") << f[i];
-			if (j > i)
-				out << "-" << f[j];
-			i = j + 1;
-		}
+		out << as_runs(count.missed_frames) << " | " << count.id_switch_frames.size();
+		if (!count.id_switch_frames.empty())
+			out << " (" << as_runs(count.id_switch_frames) << ")";
 		out << " |\n";
 	}
 	return out.str();

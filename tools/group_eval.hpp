@@ -66,8 +66,10 @@ struct GroupScore {
 	struct MoverCount {
 		uint64_t views = 0, missed = 0, split = 0;
 		std::vector<uint64_t> missed_frames; ///< seq, in order
-		/// Over every view a group covers the mover (separated or not): the relative speed error.
+		/// Over every view a group covers the mover (separated or not): the relative speed error, and the
+		/// frames where the group on it has another id than the one last on it.
 		std::vector<double> speed_relative_error;
+		std::vector<uint64_t> id_switch_frames;
 	};
 	std::map<int, MoverCount> separated_by_mover;
 	uint64_t frames_without_movers = 0;

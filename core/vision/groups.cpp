@@ -148,6 +148,20 @@ bool leaves_through_edge(const cv::Rect2f &box, cv::Point2f step, cv::Size image
 	       ((step.x < 0 && box.x < band) || (step.x > 0 && box.br().x > static_cast<float>(image.width) - band));
 }
 
+/// Whether a track's predicted box lies behind a box found in this frame: at least half of it inside that box,
+/// and the other nearer the camera by more than `same_depth_ratio` of the nearer depth (at one depth it is as
+/// likely a piece of the same mover). Without both depths, no: on monocular footage the box's bottom edge
+/// (the nearer mover's feet lower in the image) was tried and took a walker's own track from it on vtest when
+/// its residual swung from one frame to the next (docs/groups.md, stop 49).
+bool hidden_behind(const cv::Rect2f &predicted, std::optional<double> depth, const cv::Rect2f &box,
+		   std::optional<double> box_depth, double same_depth_ratio)
+{
+	const float area = predicted.area();
+	if (!depth || !box_depth || area <= 0 || (predicted & box).area() < 0.5F * area)
+		return false;
+	return *depth - *box_depth > same_depth_ratio * *box_depth;
+}
+
 /// The groups' own tolerance: the dense flow's cells' or the feature points' (GroupParams).
 double member_tolerance(const GroupParams &params)
 {
@@ -666,7 +680,7 @@ std::optional<double> velocity_along(const PositionHistory &history, double wind
 	// A measure without spread is exact and wins outright (constructed data; both: their mean).
 	if (slope_variance <= 0 || mean_variance <= 0)
 		return slope_variance <= 0 && mean_variance <= 0 ? (slope + mean_v) / 2
-								  : (slope_variance <= 0 ? slope : mean_v);
+								 : (slope_variance <= 0 ? slope : mean_v);
 	return (slope / slope_variance + mean_v / mean_variance) / (1 / slope_variance + 1 / mean_variance);
 }
 
@@ -778,11 +792,32 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 		const float smaller = std::min(predicted[t].box.area(), cluster.box.area());
 		return smaller > 0 ? (predicted[t].box & cluster.box).area() / smaller : 0.F;
 	};
+	// A published group whose predicted box lies behind a group found in this frame that moves otherwise is
+	// hidden by it, not gone: remembered (unpublished) long enough for a walker to pass in front of another
+	// (occlusion_frames), and while it is missed it takes a cluster only when they move alike. The mover in
+	// front, whose cluster may lie nearer the hidden one's predicted centre than the front one's own track
+	// does, moves otherwise; a cluster that moves alike is as likely the same mover seen whole.
+	std::vector<uint8_t> hidden(before.size(), 0);
+	for (size_t t = 0; t < before.size() && params.occlusion_frames > 0; ++t) {
+		if (!before[t].published)
+			continue;
+		const std::optional<double> depth =
+			before[t].published->position_m ? std::optional<double>((*before[t].published->position_m)[2])
+							: std::nullopt;
+		hidden[t] = std::any_of(clusters.begin(), clusters.end(), [&](const Cluster &c) {
+			return !move_alike(c.residual, before[t].residual, params) &&
+			       hidden_behind(predicted[t].box, depth, c.box,
+					     c.position ? std::optional<double>((*c.position)[2]) : std::nullopt,
+					     params.split_same_depth);
+		});
+	}
 	std::vector<Candidate> candidates;
 	for (size_t c = 0; c < clusters.size(); ++c)
 		for (size_t t = 0; t < before.size(); ++t) {
 			const double d = cv::norm(clusters[c].centre - predicted[t].centre);
-			if (d <= predicted[t].gate)
+			const bool hidden_and_missed = hidden[t] != 0 && before[t].missed_frames > 0;
+			if (d <= predicted[t].gate &&
+			    (!hidden_and_missed || move_alike(clusters[c].residual, before[t].residual, params)))
 				candidates.push_back({d, c, t});
 		}
 	std::sort(candidates.begin(), candidates.end(),
@@ -933,8 +968,10 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 			leaves_through_edge(predicted[t].box,
 					    before[t].image_velocity_pxps * static_cast<float>(context.dt_s),
 					    context.image_size, params.edge_band_px, params.edge_coast_frames);
-		const int remembered = leaving ? std::max(params.max_missed_frames, params.edge_coast_frames)
-					       : params.max_missed_frames;
+		int remembered = leaving ? std::max(params.max_missed_frames, params.edge_coast_frames)
+					 : params.max_missed_frames;
+		if (hidden[t] != 0)
+			remembered = std::max(remembered, params.occlusion_frames);
 		const int coasts =
 			leaving ? std::max(params.coast_frames, params.edge_coast_frames) : params.coast_frames;
 		if (before[t].missed_frames >= remembered)

@@ -69,6 +69,12 @@ struct GroupParams {
 	/// The band along the left and right edges: ORB keeps no corner within 31 px of the image's edge (its
 	/// patch), and a corner needs a frame more to be matched and confirmed.
 	double edge_band_px = 40;
+	/// With depth: a published group not found in a frame whose predicted box lies at least half behind a
+	/// group found in it that moves otherwise and is nearer (by more than split_same_depth) is remembered,
+	/// unpublished, for up to this many frames instead of max_missed_frames, and while missed takes only a
+	/// cluster that moves alike: a walker passing in front of another hides it for a few tenths of a second,
+	/// and it should come out under its id, while the one in front keeps its own. 0: as any other group.
+	int occlusion_frames = 30;
 	/// Weight of the new measurement in the velocity averages (after a running mean over the track's first
 	/// 1 / smoothing frames).
 	double smoothing = 0.2;

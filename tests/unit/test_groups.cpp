@@ -406,6 +406,74 @@ TEST(Groups, AMoverAlongTheSightLineTakesItsSpeedFromItsPositions)
 		  0.3);
 }
 
+TEST(Groups, AFarMoverHiddenByANearOneComesOutUnderItsId)
+{
+	// A far mover (20 points, 8 m, 3 px a frame to the left) and a near one (60 points over 120 x 200 px, 3 m,
+	// 8 px a frame to the right) pass each other; the far one's points inside the near one's extent are
+	// hidden: from frame 16 on, all of them from frame 20 to 27.
+	const auto far_and_near_ids = [](int occlusion_frames) {
+		std::mt19937 rng(5);
+		std::normal_distribution<float> noise(0.f, 0.2f);
+		GroupParams params;
+		params.occlusion_frames = occlusion_frames;
+		AffinityPropagation workspace;
+		GroupMemory memory;
+		const GroupMotionContext context = tenth_of_a_second();
+		std::vector<std::pair<int, int>> ids; // per frame: the far group's id (0: none), the near one's
+		for (int frame = 0; frame < 45; ++frame) {
+			std::vector<MotionPoint> points = still_background(rng);
+			const float near_x0 = 100.F + 8.F * static_cast<float>(frame), near_x1 = near_x0 + 120.F;
+			const size_t near_first = points.size();
+			for (int i = 0; i < 60; ++i) {
+				MotionPoint p;
+				p.px = {near_x0 + static_cast<float>(i % 6) * 24.F,
+					150.F + static_cast<float>(i / 6) * 20.F};
+				p.flow = {8.F + noise(rng), noise(rng)};
+				p.residual = p.flow;
+				p.xyz = cv::Vec3f(0, 0, 3);
+				points.push_back(p);
+			}
+			const size_t far_first = points.size();
+			for (int i = 0; i < 20; ++i) {
+				MotionPoint p;
+				p.px = {400.F - 3.F * static_cast<float>(frame) + static_cast<float>(i % 5) * 10.F,
+					250.F + static_cast<float>(i / 5) * 10.F};
+				if (p.px.x >= near_x0 - 4 && p.px.x <= near_x1 + 4)
+					continue; // behind the near mover
+				p.flow = {-3.F + noise(rng), noise(rng)};
+				p.residual = p.flow;
+				p.xyz = cv::Vec3f(0, 0, 8);
+				points.push_back(p);
+			}
+			GroupOutput out =
+				find_groups(points, frame == 0 ? nullptr : &memory, context, params, workspace);
+			memory = out.memory;
+			const auto id_of = [&](size_t i) {
+				return i < points.size() && out.group_of_point[i] >= 0
+					       ? out.groups[static_cast<size_t>(out.group_of_point[i])].id
+					       : 0;
+			};
+			ids.emplace_back(points.size() > far_first ? id_of(far_first) : 0, id_of(near_first));
+		}
+		return ids;
+	};
+	const auto ids = far_and_near_ids(30);
+	const int far_id = ids[10].first, near_id = ids[10].second;
+	ASSERT_NE(far_id, 0);
+	ASSERT_NE(near_id, 0);
+	ASSERT_NE(far_id, near_id);
+	for (int frame = 1; frame < 45; ++frame)
+		EXPECT_EQ(ids[static_cast<size_t>(frame)].second, near_id) << "the near mover, frame " << frame;
+	for (int frame = 20; frame <= 27; ++frame)
+		EXPECT_EQ(ids[static_cast<size_t>(frame)].first, 0) << "hidden, frame " << frame;
+	for (int frame = 31; frame < 45; ++frame)
+		EXPECT_EQ(ids[static_cast<size_t>(frame)].first, far_id) << "come out, frame " << frame;
+	// Forgotten after max_missed_frames, it comes out under a new id.
+	const auto forgotten = far_and_near_ids(0);
+	EXPECT_NE(forgotten[40].first, 0);
+	EXPECT_NE(forgotten[40].first, forgotten[10].first);
+}
+
 TEST(Groups, AMissedGroupCoastsOnItsVelocityKeepingItsId)
 {
 	// Group A of the crossing scene alone (B's points dropped), seen for 6 frames, then missing from the
