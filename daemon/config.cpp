@@ -876,7 +876,8 @@ const std::vector<Option> &options()
 		o.push_back(number(
 			"groups", "occlusion_frames",
 			"tracks: a published group not found whose predicted box lies at least half behind a nearer "
-			"group found in the frame is remembered (unpublished) this many frames; 0: as any group",
+			"group found in the frame is remembered (coasted only coast_frames) this many frames; 0: as "
+			"any group",
 			[](DaemonConfig &c) -> int & { return c.motion.groups.occlusion_frames; }, 0, 1000));
 		o.push_back(number(
 			"groups", "smoothing",

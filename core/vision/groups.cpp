@@ -793,9 +793,9 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 		return smaller > 0 ? (predicted[t].box & cluster.box).area() / smaller : 0.F;
 	};
 	// A published group whose predicted box lies behind a group found in this frame that moves otherwise is
-	// hidden by it, not gone: remembered (unpublished) long enough for a walker to pass in front of another
-	// (occlusion_frames), and while it is missed it takes a cluster only when they move alike. The mover in
-	// front, whose cluster may lie nearer the hidden one's predicted centre than the front one's own track
+	// hidden by it, not gone: remembered (published on only for coast_frames) long enough for a walker to pass in
+	// front of another (occlusion_frames), and while it is missed it takes a cluster only when they move alike. The
+	// mover in front, whose cluster may lie nearer the hidden one's predicted centre than the front one's own track
 	// does, moves otherwise; a cluster that moves alike is as likely the same mover seen whole.
 	std::vector<uint8_t> hidden(before.size(), 0);
 	for (size_t t = 0; t < before.size() && params.occlusion_frames > 0; ++t) {

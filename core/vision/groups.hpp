@@ -71,9 +71,10 @@ struct GroupParams {
 	double edge_band_px = 40;
 	/// With depth: a published group not found in a frame whose predicted box lies at least half behind a
 	/// group found in it that moves otherwise and is nearer (by more than split_same_depth) is remembered,
-	/// unpublished, for up to this many frames instead of max_missed_frames, and while missed takes only a
-	/// cluster that moves alike: a walker passing in front of another hides it for a few tenths of a second,
-	/// and it should come out under its id, while the one in front keeps its own. 0: as any other group.
+	/// published on only for coast_frames as any missed group, for up to this many frames instead of
+	/// max_missed_frames, and while missed takes only a cluster that moves alike: a walker passing in front of
+	/// another hides it for a few tenths of a second, and it should come out under its id, while the one in front
+	/// keeps its own. 0: as any other group.
 	int occlusion_frames = 30;
 	/// Weight of the new measurement in the velocity averages (after a running mean over the track's first
 	/// 1 / smoothing frames).
