@@ -213,7 +213,7 @@ void GroupScore::add(const FrameResult &result, const cv::Mat &mask, const std::
 			separated_movers_missed += groups_on == 0 ? 1 : 0;
 			if (!mover.metric)
 				continue; // a pixels-only reference's ids are per frame
-			MoverCount &count = separated_by_mover[mover.id];
+			MoverCount &count = by_mover[mover.id];
 			++count.views;
 			count.split += groups_on >= 2 ? 1 : 0;
 			if (groups_on == 0) {
@@ -265,7 +265,7 @@ void GroupScore::add(const FrameResult &result, const cv::Mat &mask, const std::
 		if (const auto it = last_group_of_mover.find(mover.id);
 		    it != last_group_of_mover.end() && it->second != best->id) {
 			++id_switches;
-			separated_by_mover[mover.id].id_switch_frames.push_back(result.seq);
+			by_mover[mover.id].id_switch_frames.push_back(result.seq);
 		}
 		last_group_of_mover[mover.id] = best->id;
 		if (best->position_m) {
@@ -276,7 +276,7 @@ void GroupScore::add(const FrameResult &result, const cv::Mat &mask, const std::
 		if (best->speed_mps && true_speed > 1e-6) {
 			const double error = std::abs(*best->speed_mps - true_speed) / true_speed;
 			speed_relative_error.push_back(error);
-			separated_by_mover[mover.id].speed_relative_error.push_back(error);
+			by_mover[mover.id].speed_relative_error.push_back(error);
 		}
 		const cv::Vec3d &v = mover.world_velocity_mps;
 		const double ground_speed = std::hypot(v[0], v[2]);
@@ -371,7 +371,7 @@ std::string group_mover_table(const GroupScore &s)
 	out << "| mover (mask id) | separated views | missed | split | speed error (median, all views) | frames missed "
 	       "| id switches (frames) |\n";
 	out << "|---|---|---|---|---|---|---|\n";
-	for (const auto &[id, count] : s.separated_by_mover) {
+	for (const auto &[id, count] : s.by_mover) {
 		out << "| " << id << " | " << count.views << " | " << count.missed << " | " << count.split << " | "
 		    << median(count.speed_relative_error) << " | ";
 		out << as_runs(count.missed_frames) << " | " << count.id_switch_frames.size();

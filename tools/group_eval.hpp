@@ -61,17 +61,17 @@ struct GroupScore {
 	uint64_t count_over = 0, count_under = 0;
 	uint64_t separated_mover_views = 0, separated_movers_split = 0, separated_movers_missed = 0;
 	uint64_t separated_groups = 0, separated_groups_off = 0;
-	/// The same per mover of a reference with ids that hold across frames (TrueMover::metric): which mover
-	/// the count lacks, and in which frames (group_mover_table).
+	/// Per mover of a reference with ids that hold across frames (TrueMover::metric; group_mover_table). In the
+	/// separated frames, as above: which mover the count lacks, and in which frames.
 	struct MoverCount {
-		uint64_t views = 0, missed = 0, split = 0;
-		std::vector<uint64_t> missed_frames; ///< seq, in order
+		uint64_t views = 0, missed = 0, split = 0; ///< separated views only
+		std::vector<uint64_t> missed_frames;	   ///< seq, in order
 		/// Over every view a group covers the mover (separated or not): the relative speed error, and the
 		/// frames where the group on it has another id than the one last on it.
 		std::vector<double> speed_relative_error;
 		std::vector<uint64_t> id_switch_frames;
 	};
-	std::map<int, MoverCount> separated_by_mover;
+	std::map<int, MoverCount> by_mover;
 	uint64_t frames_without_movers = 0;
 	uint64_t groups_without_movers = 0; ///< groups in frames where no mover is in view
 	uint64_t groups = 0;

@@ -284,7 +284,7 @@ int eval_groups(const std::string &results_path, const std::string &truth_dir, c
 		std::cout << "\n" << tools::group_score_table(name, score);
 		if (count_detail) {
 			std::cout << "\n" << tools::group_count_table(name, score);
-			if (!score.separated_by_mover.empty())
+			if (!score.by_mover.empty())
 				std::cout << "\n" << tools::group_mover_table(score);
 		}
 	}

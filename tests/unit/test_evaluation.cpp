@@ -256,18 +256,18 @@ TEST(GroupEvaluation, HandComputedFrames)
 			frame.groups = mover_1_only;
 		score.add(frame, mask, movers);
 	}
-	ASSERT_EQ(score.separated_by_mover.size(), 2U);
-	EXPECT_EQ(score.separated_by_mover[1].views, 7U);
-	EXPECT_EQ(score.separated_by_mover[1].missed, 0U);
-	EXPECT_EQ(score.separated_by_mover[2].missed, 5U);
-	EXPECT_EQ(score.separated_by_mover[2].missed_frames, (std::vector<uint64_t>{1, 3, 4, 5, 7}));
+	ASSERT_EQ(score.by_mover.size(), 2U);
+	EXPECT_EQ(score.by_mover[1].views, 7U);
+	EXPECT_EQ(score.by_mover[1].missed, 0U);
+	EXPECT_EQ(score.by_mover[2].missed, 5U);
+	EXPECT_EQ(score.by_mover[2].missed_frames, (std::vector<uint64_t>{1, 3, 4, 5, 7}));
 	// Mover 1's group changed its id in frame 2 (7 -> 9), and its speed was 10 % fast in frame 1, exact in its
 	// six frames after.
-	EXPECT_EQ(score.separated_by_mover[1].id_switch_frames, (std::vector<uint64_t>{2}));
+	EXPECT_EQ(score.by_mover[1].id_switch_frames, (std::vector<uint64_t>{2}));
 	EXPECT_NE(tools::group_mover_table(score).find("| 1 (2) |"), std::string::npos)
 		<< tools::group_mover_table(score);
-	ASSERT_EQ(score.separated_by_mover[1].speed_relative_error.size(), 7U);
-	EXPECT_NEAR(score.separated_by_mover[1].speed_relative_error[0], 0.1, 1e-6);
+	ASSERT_EQ(score.by_mover[1].speed_relative_error.size(), 7U);
+	EXPECT_NEAR(score.by_mover[1].speed_relative_error[0], 0.1, 1e-6);
 	EXPECT_NE(tools::group_mover_table(score).find("| 2 | 7 | 5 | 0 | 0 | 1, 3-5, 7 | 0 |"), std::string::npos)
 		<< tools::group_mover_table(score);
 }
