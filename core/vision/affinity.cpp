@@ -20,6 +20,13 @@ float squared_distance(const float *a, const float *b, int dims)
 
 } // namespace
 
+cv::Mat AffinityPropagation::sample_buffer(int rows, int cols)
+{
+	CV_Assert(rows >= 0 && cols > 0);
+	sample_storage_.resize(static_cast<size_t>(rows) * static_cast<size_t>(cols));
+	return {rows, cols, CV_32F, sample_storage_.data()};
+}
+
 float AffinityPropagation::farthest_pair(const float *data, size_t n, int dims)
 {
 	// Exactly, but not over all n^2 / 2 pairs: with r the distance of each sample to the samples' mean, no
@@ -191,6 +198,13 @@ const AffinityResult &AffinityPropagation::cluster(const cv::Mat &samples, const
 					++row_start_[column_[e] + 1];
 			}
 		std::partial_sum(row_start_.begin(), row_start_.end(), row_start_.begin());
+		// How many links a frame's samples make depends on how they lie (between N (k + 1) and N (2 k + 1)):
+		// room for the most, so that a later frame of no more samples never grows the buffers.
+		const size_t most = n * (2 * k + 1);
+		links_.reserve(most);
+		column_.reserve(most);
+		for (auto *messages : {&similarity_, &responsibility_, &availability_})
+			messages->reserve(most);
 		links_.resize(row_start_[n]);
 		order_.assign(row_start_.begin(), row_start_.end() - 1); // each row's fill cursor
 		for (size_t i = 0; i < n; ++i)

@@ -44,11 +44,17 @@ public:
 	/// The result lives in this object until the next call.
 	const AffinityResult &cluster(const cv::Mat &samples, const AffinityParams &params);
 
+	/// A rows x cols CV_32F matrix over storage this object keeps (grown, never shrunk), for the caller to fill
+	/// with the next call's samples, so that they allocate nothing either once the largest size has been
+	/// seen. Valid until the next call of this.
+	cv::Mat sample_buffer(int rows, int cols);
+
 	/// The largest squared distance between two rows of `data` (n x dims), exactly.
 	float farthest_pair(const float *data, size_t n, int dims);
 
 private:
 	AffinityResult result_;
+	std::vector<float> sample_storage_;
 	std::vector<float> centre_, radius_;
 	// Edges in row-major order: row i's edges are [row_start_[i], row_start_[i + 1]); its last is (i, i).
 	std::vector<uint32_t> row_start_, column_;

@@ -534,7 +534,7 @@ ClusterRound cluster_round(const std::vector<uint32_t> &chosen, const std::vecto
 			   std::vector<uint32_t> *unplaced)
 {
 	// Seed 002's 6-d samples, each dimension over its scale: octave, row, column, disparity, flow u, flow v.
-	cv::Mat samples(static_cast<int>(chosen.size()), 6, CV_32F);
+	cv::Mat samples = workspace.sample_buffer(static_cast<int>(chosen.size()), 6);
 	for (size_t s = 0; s < chosen.size(); ++s) {
 		const MotionPoint &p = points[chosen[s]];
 		float disparity = 0;
