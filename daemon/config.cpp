@@ -531,6 +531,15 @@ const std::vector<Option> &options()
 		o.push_back(number(
 			"stereo", "window_radius_px", "sub-pixel refinement window half-size",
 			[](DaemonConfig &c) -> int & { return c.motion.stereo.window_radius_px; }, 1, 15));
+		o.push_back(number(
+			"stereo", "edge_split_px",
+			"a match whose window's halves (left / right, top / bottom) refine to disparities more than "
+			"this apart straddles a depth edge (0: no test)",
+			[](DaemonConfig &c) -> double & { return c.motion.stereo.edge_split_px; }, 0, 100));
+		o.push_back(boolean("stereo", "drop_edge_depth",
+				    "no depth at all for a match across a depth edge (better labels and depth, fewer "
+				    "groups); false: kept, but not for a group's velocity",
+				    [](DaemonConfig &c) -> bool & { return c.motion.stereo.drop_edge_depth; }));
 		o.push_back(
 			boolean("stereo", "row_search",
 				"look for unmatched left keypoints along their row of the right image (correlation)",

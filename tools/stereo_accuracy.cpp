@@ -68,6 +68,9 @@ int main(int argc, char **argv)
 		->capture_default_str();
 	app.add_option("--row-search-uniqueness", sp.row_search_uniqueness, "stereo.row_search_uniqueness")
 		->capture_default_str();
+	app.add_option("--edge-split-px", sp.edge_split_px, "stereo.edge_split_px")->capture_default_str();
+	app.add_flag("--drop-edge-depth", sp.drop_edge_depth,
+		     "no depth for matches across a depth edge (stereo.drop_edge_depth); otherwise a row of them");
 	CLI11_PARSE(app, argc, argv);
 	if (!sp.row_search)
 		sp.right_features = true; // descriptor matches are then all there is
@@ -124,7 +127,7 @@ int main(int argc, char **argv)
 	cv::Mat dense;
 	sgbm->compute(left_grey, right_grey, dense); // CV_16S, 4 fractional bits
 
-	std::vector<double> ours, theirs, raw, searched;
+	std::vector<double> ours, theirs, raw, searched, clear, across;
 	size_t no_truth = 0;
 	for (size_t i = 0; i < lf.keypoints.size(); ++i) {
 		if (std::isnan(depth.disparity[i]))
@@ -138,6 +141,7 @@ int main(int argc, char **argv)
 		}
 		const double true_d = g / gt_scale;
 		ours.push_back(std::abs(depth.disparity[i] - true_d));
+		(depth.on_edge[i] != 0 ? across : clear).push_back(ours.back());
 		const int r = depth.right_index[i];
 		if (r >= 0)
 			raw.push_back(
@@ -156,6 +160,8 @@ int main(int argc, char **argv)
 		    "|\n|---|---|---|---|---|---|\n");
 	for (const Row &row : {score("stereod sparse (refined)", ours), score("stereod sparse, keypoint x only", raw),
 			       score("stereod sparse, of them found along the row", searched),
+			       score("stereod sparse, of them not across a depth edge", clear),
+			       score("stereod sparse, of them across a depth edge (stereo.edge_split_px)", across),
 			       score("OpenCV StereoSGBM at the same points", theirs)})
 		std::printf("| %s | %zu | %.3f | %.3f | %.1f%% | %.1f%% |\n", row.method.c_str(), row.points,
 			    row.median, row.mean, 100 * row.within_half, 100 * row.within_one);

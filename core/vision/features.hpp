@@ -39,6 +39,9 @@ struct FrameFeatures {
 	/// Per keypoint: the left-camera 3D point (metres) from stereo or a depth image, NaN where unmeasured;
 	/// empty when the frame has no depth at all (monocular, or no calibration).
 	std::vector<cv::Vec3f> xyz;
+	/// Per keypoint, with stereo: 1 where the match's window straddles a depth edge (StereoDepth::on_edge):
+	/// its depth is kept for the labels and the grouping but not given to the pose or a group's velocity.
+	std::vector<uint8_t> depth_on_edge;
 	std::optional<StereoSummary> stereo; ///< how the stereo matching went, when it ran
 	/// The left image in grey (owned, not a pool buffer), for sub-pixel refinement of the temporal matches.
 	cv::Mat grey;

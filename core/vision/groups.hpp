@@ -172,7 +172,10 @@ struct MotionPoint {
 	int octave = 0;			   ///< pyramid level of its keypoint (the seed's "scale")
 	std::optional<cv::Vec3f> xyz;	   ///< this frame's camera, metres
 	std::optional<cv::Vec3f> prev_xyz; ///< the previous frame's camera, metres
-	bool dynamic = false;		   ///< the classifier's label (GroupMembers::Labels)
+	/// Either depth came from a stereo window across a depth edge (StereoParams::edge_split_px): good enough to
+	/// cluster by, not to measure the group's velocity with.
+	bool depth_on_edge = false;
+	bool dynamic = false; ///< the classifier's label (GroupMembers::Labels)
 	/// Where only part of the motion is measured (a grid cell on an edge: the aperture problem), the unit
 	/// direction across the edge; (0, 0): the whole residual is measured. find_groups drops a cluster most
 	/// of whose members have a residual across their edge under min_flow_px.

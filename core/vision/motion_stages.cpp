@@ -78,6 +78,12 @@ bool flagged_before(const TrackSet *prev_tracks, size_t p)
 	       prev_tracks->dynamic_by_keypoint[p] != 0;
 }
 
+/// Whether keypoint `k`'s depth came from a stereo window across a depth edge (FrameFeatures::depth_on_edge).
+bool on_depth_edge(const FrameFeatures &features, size_t k)
+{
+	return k < features.depth_on_edge.size() && features.depth_on_edge[k] != 0;
+}
+
 /// A point's own motion: where it is minus where the static scene model puts it (the pose's prediction from
 /// its depth, else the homography); NaN without either.
 cv::Point2f own_motion(const PointPair &pair, cv::Point2f predicted, const std::optional<cv::Matx33d> &homography)
@@ -279,6 +285,7 @@ FrameFeatures extract_stage(const StereoFrame &frame, const MotionParams &params
 	const double scale_step = params.features.detector == Detector::Orb ? params.features.orb_scale : 1.4;
 	StereoDepth depth = match_stereo(features, right, grey, right_grey, *params.rig, params.stereo, scale_step);
 	features.xyz = std::move(depth.xyz);
+	features.depth_on_edge = std::move(depth.on_edge);
 	add_cell_depths(features, frame.left.size(), params);
 	features.stereo = StereoSummary{
 		static_cast<int>(features.keypoints.size()), depth.matched,	depth.candidates, depth.outside_band,
@@ -592,6 +599,7 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 				m.xyz = cur.xyz[c];
 			if (p < prev->xyz.size() && std::isfinite(prev->xyz[p][2]))
 				m.prev_xyz = prev->xyz[p];
+			m.depth_on_edge = on_depth_edge(cur, c) || on_depth_edge(*prev, p);
 		}
 		// The followed points after the matched ones: clustered, never labelled or published.
 		for (const FollowedPoint &f : followed) {

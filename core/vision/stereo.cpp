@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 #include <numeric>
+#include <optional>
 
 namespace stereod::vision {
 
@@ -216,8 +217,10 @@ float median_of(std::vector<float> values)
 }
 
 float refine_disparity(const cv::Mat &left_grey, const cv::Mat &right_grey, cv::Point2f left_pt, float disparity_px,
-		       int radius, int window_radius)
+		       int radius, int window_radius, double split_px, bool *straddles)
 {
+	if (straddles != nullptr)
+		*straddles = false;
 	const int x = static_cast<int>(std::lround(left_pt.x));
 	const int y = static_cast<int>(std::lround(left_pt.y));
 	const int d0 = static_cast<int>(std::lround(disparity_px));
@@ -228,30 +231,79 @@ float refine_disparity(const cv::Mat &left_grey, const cv::Mat &right_grey, cv::
 	if (!window_inside(right_grey, x - hi, y, window_radius) ||
 	    !window_inside(right_grey, x - lo, y, window_radius))
 		return kNaN;
-	std::array<int, 64> cost{};
-	if (hi - lo + 1 > static_cast<int>(cost.size()))
+	// The whole window's costs, and its four halves' (left of the centre column, right of it, above the
+	// centre row, below it) for the depth-edge test.
+	enum Part { kWhole, kLeft, kRight, kTop, kBottom, kParts };
+	std::array<std::array<int, 64>, kParts> cost{};
+	if (hi - lo + 1 > static_cast<int>(cost[0].size()))
 		return kNaN;
-	int best = -1;
+	const int r = window_radius;
 	for (int d = lo; d <= hi; ++d) {
-		cost[static_cast<size_t>(d - lo)] = window_sad(left_grey, right_grey, x, y, x - d, y, window_radius);
-		if (d > lo && d < hi &&
-		    (best < 0 || cost[static_cast<size_t>(d - lo)] < cost[static_cast<size_t>(best - lo)]))
-			best = d;
+		std::array<int, kParts> sum{};
+		for (int dy = -r; dy <= r; ++dy) {
+			const uint8_t *a = left_grey.ptr<uint8_t>(y + dy) + x - r;
+			const uint8_t *b = right_grey.ptr<uint8_t>(y + dy) + x - d - r;
+			int row_left = 0, row_right = 0, row = 0;
+			for (int dx = 0; dx <= 2 * r; ++dx) {
+				const int diff = std::abs(static_cast<int>(a[dx]) - static_cast<int>(b[dx]));
+				row += diff;
+				row_left += dx < r ? diff : 0;
+				row_right += dx > r ? diff : 0;
+			}
+			sum[kWhole] += row;
+			sum[kLeft] += row_left;
+			sum[kRight] += row_right;
+			sum[kTop] += dy < 0 ? row : 0;
+			sum[kBottom] += dy > 0 ? row : 0;
+		}
+		for (size_t part = 0; part < kParts; ++part)
+			cost[part][static_cast<size_t>(d - lo)] = sum[part];
 	}
-	const auto at = [&](int d) { return static_cast<double>(cost[static_cast<size_t>(d - lo)]); };
+	// The refined disparity of one part: the minimum over the inner disparities and the V fit through it;
+	// nullopt when the minimum sits on the edge of the range.
+	const auto refined = [&](Part part) -> std::optional<double> {
+		const auto at = [&](int d) { return static_cast<double>(cost[part][static_cast<size_t>(d - lo)]); };
+		int best = lo + 1;
+		for (int d = lo + 2; d < hi; ++d)
+			if (at(d) < at(best))
+				best = d;
+		if ((best == lo + 1 && at(lo) <= at(best)) || (best == hi - 1 && at(hi) <= at(best)))
+			return std::nullopt;
+		return best + vertex_offset(at(best - 1), at(best), at(best + 1));
+	};
 	// A minimum on the edge of the searched range is not a minimum: the descriptor match was off.
-	if (best == lo + 1 && at(lo) <= at(best))
+	const std::optional<double> whole = refined(kWhole);
+	if (!whole)
 		return kNaN;
-	if (best == hi - 1 && at(hi) <= at(best))
-		return kNaN;
+	if (split_px > 0 && straddles != nullptr) {
+		// A window across a depth edge (a mover's outline against the background) holds two disparities;
+		// its halves on either side of the edge then prefer different ones, and the whole window's lies
+		// between them and follows neither surface. A half too flat to prefer anything (its costs vary by
+		// under 2 grey levels a pixel over the range) has no say.
+		const int half_pixels = r * (2 * r + 1);
+		const auto textured = [&](Part part) {
+			const auto [low, high] =
+				std::minmax_element(cost[part].begin(), cost[part].begin() + (hi - lo + 1));
+			return *high - *low >= 2 * half_pixels;
+		};
+		for (const auto &[a, b] : {std::pair{kLeft, kRight}, std::pair{kTop, kBottom}}) {
+			if (!textured(a) || !textured(b))
+				continue;
+			const std::optional<double> da = refined(a), db = refined(b);
+			if (!da || !db || std::abs(*da - *db) > split_px)
+				*straddles = true;
+		}
+	}
 	// The refined disparity belongs to the integer pixel; carry it to the keypoint's own column, which is
 	// the same disparity on a surface seen front-on and within the noise otherwise.
-	return static_cast<float>(best + vertex_offset(at(best - 1), at(best), at(best + 1)));
+	return static_cast<float>(*whole);
 }
 
 float search_row(const cv::Mat &left_grey, const cv::Mat &right_grey, cv::Point2f left_pt, const StereoParams &params,
-		 RowSearchBuffers &buffers)
+		 RowSearchBuffers &buffers, bool *straddles)
 {
+	if (straddles != nullptr)
+		*straddles = false;
 	const int x = static_cast<int>(std::lround(left_pt.x));
 	const int y = static_cast<int>(std::lround(left_pt.y));
 	const int r = params.window_radius_px;
@@ -290,7 +342,8 @@ float search_row(const cv::Mat &left_grey, const cv::Mat &right_grey, cv::Point2
 					     right_grey(cv::Rect(xr - r, y - r, side, side)), buffers);
 	if (std::abs(b_lo + back.column - d) > 1)
 		return kNaN;
-	return refine_disparity(left_grey, right_grey, left_pt, static_cast<float>(d), params.refine_radius_px, r);
+	return refine_disparity(left_grey, right_grey, left_pt, static_cast<float>(d), params.refine_radius_px, r,
+				params.edge_split_px, straddles);
 }
 
 float row_offset(const cv::Mat &left_grey, const cv::Mat &right_grey, cv::Point2f left_pt, float disparity_px,
@@ -319,18 +372,21 @@ float row_offset(const cv::Mat &left_grey, const cv::Mat &right_grey, cv::Point2
 
 namespace {
 
-/// Left keypoint i's disparity and 3D point into `out`, when the disparity is in range and triangulates;
-/// false otherwise (NaN included).
-bool store_depth(size_t i, cv::Point2f pt, float d, const geometry::StereoRig &rig, const StereoParams &params,
-		 StereoDepth &out)
+/// Left keypoint i's disparity and 3D point into `out`, when the disparity is in range and triangulates (and,
+/// with drop_edge_depth, its window does not straddle a depth edge); false otherwise (NaN included).
+bool store_depth(size_t i, cv::Point2f pt, float d, bool straddles, const geometry::StereoRig &rig,
+		 const StereoParams &params, StereoDepth &out)
 {
 	if (!(d >= static_cast<float>(params.min_disparity_px)) || d > static_cast<float>(params.max_disparity_px))
+		return false;
+	if (straddles && params.drop_edge_depth)
 		return false;
 	const auto p = rig.triangulate(pt.x, pt.y, d);
 	if (!p)
 		return false;
 	out.disparity[i] = d;
 	out.xyz[i] = cv::Vec3f(static_cast<float>((*p)[0]), static_cast<float>((*p)[1]), static_cast<float>((*p)[2]));
+	out.on_edge[i] = straddles ? 1 : 0;
 	return true;
 }
 
@@ -417,9 +473,10 @@ void match_descriptors(const FrameFeatures &left, const FrameFeatures &right, co
 
 		const cv::KeyPoint &l = left.keypoints[i];
 		const cv::KeyPoint &r = right.keypoints[static_cast<size_t>(f.index)];
+		bool straddles = false;
 		const float d = refine_disparity(left_grey, right_grey, l.pt, l.pt.x - r.pt.x, params.refine_radius_px,
-						 params.window_radius_px);
-		if (!store_depth(i, l.pt, d, rig, params, out))
+						 params.window_radius_px, params.edge_split_px, &straddles);
+		if (!store_depth(i, l.pt, d, straddles, rig, params, out))
 			continue;
 		out.right_index[i] = f.index;
 		out.row_differences.push_back(row_offset(left_grey, right_grey, l.pt, d, params.window_radius_px));
@@ -438,6 +495,7 @@ StereoDepth match_stereo(const FrameFeatures &left, const FrameFeatures &right, 
 	out.disparity.assign(n_left, kNaN);
 	out.xyz.assign(n_left, cv::Vec3f(kNaN, kNaN, kNaN));
 	out.right_index.assign(n_left, -1);
+	out.on_edge.assign(n_left, 0);
 	const bool descriptors = !right.keypoints.empty() && !left.descriptors.empty() && !right.descriptors.empty() &&
 				 left.norm_type == right.norm_type;
 	if (n_left > 0 && descriptors)
@@ -453,8 +511,9 @@ StereoDepth match_stereo(const FrameFeatures &left, const FrameFeatures &right, 
 		if (!std::isnan(out.disparity[i]))
 			continue;
 		const cv::Point2f pt = left.keypoints[i].pt;
-		const float d = search_row(left_grey, right_grey, pt, params, buffers);
-		if (!store_depth(i, pt, d, rig, params, out))
+		bool straddles = false;
+		const float d = search_row(left_grey, right_grey, pt, params, buffers, &straddles);
+		if (!store_depth(i, pt, d, straddles, rig, params, out))
 			continue;
 		if (!descriptors)
 			out.row_differences.push_back(

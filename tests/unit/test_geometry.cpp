@@ -514,6 +514,42 @@ TEST(Stereo, RefinesDisparityToAFractionOfAPixel)
 	EXPECT_TRUE(std::isnan(refine_disparity(left, right, {2, 50}, 10, 2, 5)));
 }
 
+// A window across a depth edge holds two disparities: a near textured surface (disparity 14, left of column 100)
+// beside a farther one (11), at the near one's right edge, where the right eye sees the far one uncovered. With
+// stereo.edge_split_px the point whose window straddles the edge is marked; points wholly on either surface are
+// not.
+TEST(Stereo, AWindowAcrossADepthEdgeIsMarked)
+{
+	const cv::Mat far_surface = texture(200, 100, 21), near_surface = texture(200, 100, 22);
+	constexpr int kEdge = 100, kFar = 11, kNear = 14;
+	cv::Mat left(100, 200, CV_8UC1), right(100, 200, CV_8UC1);
+	for (int y = 0; y < 100; ++y)
+		for (int x = 0; x < 200; ++x) {
+			left.at<uint8_t>(y, x) =
+				x < kEdge ? near_surface.at<uint8_t>(y, x) : far_surface.at<uint8_t>(y, x);
+			right.at<uint8_t>(y, x) = x + kNear < kEdge
+							  ? near_surface.at<uint8_t>(y, x + kNear)
+							  : far_surface.at<uint8_t>(y, std::min(199, x + kFar));
+		}
+	const auto straddles = [&](float u, int d, double split) {
+		bool across = false;
+		const float refined =
+			refine_disparity(left, right, {u, 50}, static_cast<float>(d), 2, 5, split, &across);
+		EXPECT_TRUE(std::isfinite(refined)) << "at " << u;
+		return across;
+	};
+	EXPECT_NEAR(refine_disparity(left, right, {60, 50}, kNear, 2, 5), kNear, 0.12) << "wholly on the near surface";
+	EXPECT_NEAR(refine_disparity(left, right, {140, 50}, kFar, 2, 5), kFar, 0.12) << "wholly on the far surface";
+	EXPECT_FALSE(straddles(60, kNear, 1.0));
+	EXPECT_FALSE(straddles(140, kFar, 1.0));
+	// Half the window on each surface: its left half prefers 14, its right half 11, the whole window
+	// something between that is neither surface's.
+	EXPECT_TRUE(straddles(kEdge, (kNear + kFar) / 2, 1.0));
+	// Halves that agree within the threshold pass: a wide one lets this window through, and 0 is no test.
+	EXPECT_FALSE(straddles(kEdge, (kNear + kFar) / 2, 5.0));
+	EXPECT_FALSE(straddles(kEdge, (kNear + kFar) / 2, 0));
+}
+
 TEST(Stereo, MatchesConstructedPairAndMeasuresDepthAndRowHealth)
 {
 	const cv::Mat left = texture(640, 480, 5);
