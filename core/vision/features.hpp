@@ -40,7 +40,8 @@ struct FrameFeatures {
 	/// empty when the frame has no depth at all (monocular, or no calibration).
 	std::vector<cv::Vec3f> xyz;
 	/// Per keypoint, with stereo: 1 where the match's window straddles a depth edge (StereoDepth::on_edge):
-	/// its depth is kept for the labels and the grouping but not given to the pose or a group's velocity.
+	/// its depth is kept for the pose, the labels and the grouping, but a group's velocity is measured
+	/// without it.
 	std::vector<uint8_t> depth_on_edge;
 	std::optional<StereoSummary> stereo; ///< how the stereo matching went, when it ran
 	/// The left image in grey (owned, not a pool buffer), for sub-pixel refinement of the temporal matches.
