@@ -57,13 +57,14 @@ Cluster measure(std::vector<uint32_t> members, const std::vector<MotionPoint> &p
 		for (int a = 0; a < 3; ++a)
 			xyz[static_cast<size_t>(a)].push_back((*p.xyz)[a]);
 	}
-	// The velocities from the members whose depths came from windows on one surface, where at least three
-	// have both: a window across the mover's outline follows its depth only in part, and on a mover along
-	// the line of sight such members held the median velocity at half the true one (docs/groups.md, stop 50).
+	// The velocities from the members whose depths came from windows on one surface, where enough have both:
+	// a window across the mover's outline follows its depth only in part, and on a mover along the line of
+	// sight such members held the median velocity at half the true one (docs/groups.md, stop 50).
+	constexpr size_t kMinWithDepth = 3;
 	const auto clean = std::count_if(c.members.begin(), c.members.end(), [&](uint32_t i) {
 		return points[i].xyz && points[i].prev_xyz && !points[i].depth_on_edge;
 	});
-	const bool clean_only = clean >= 3;
+	const bool clean_only = static_cast<size_t>(clean) >= kMinWithDepth;
 	for (const uint32_t i : c.members) {
 		const MotionPoint &p = points[i];
 		if (!p.xyz || (clean_only && p.depth_on_edge))
@@ -87,7 +88,6 @@ Cluster measure(std::vector<uint32_t> members, const std::vector<MotionPoint> &p
 	c.centre = {median_of(u), median_of(v)};
 	c.flow = {median_of(fu), median_of(fv)};
 	c.residual = {median_of(ru), median_of(rv)};
-	constexpr size_t kMinWithDepth = 3;
 	if (xyz[0].size() >= kMinWithDepth) {
 		cv::Vec3d position, extent;
 		for (size_t a = 0; a < 3; ++a) {
