@@ -201,6 +201,21 @@ void GroupScore::add(const FrameResult &result, const cv::Mat &mask, const std::
 	const std::vector<int> on = match_groups(gs, mask);
 	if (separated) {
 		++frames_separated;
+		// The frame's feature points on each mover (mask ids, any label).
+		std::array<int, 256> points_on{};
+		for (const LabelledPoint &point : result.points) {
+			const int x = cvRound(point.u), y = cvRound(point.v);
+			if (x >= 0 && y >= 0 && x < mask.cols && y < mask.rows)
+				++points_on[mask.at<uint8_t>(y, x)];
+		}
+		const auto seen = [&](const TrueMover &mover) {
+			return mover.id > 0 && mover.id < 256 &&
+			       points_on[static_cast<size_t>(mover.id)] >= seen_min_points;
+		};
+		if (std::all_of(movers.begin(), movers.end(), seen)) {
+			++frames_seen;
+			count_exact_seen += gs.size() == movers.size() ? 1 : 0;
+		}
 		count_exact += gs.size() == movers.size() ? 1 : 0;
 		count_over += gs.size() > movers.size() ? 1 : 0;
 		count_under += gs.size() < movers.size() ? 1 : 0;
@@ -216,8 +231,10 @@ void GroupScore::add(const FrameResult &result, const cv::Mat &mask, const std::
 			MoverCount &count = by_mover[mover.id];
 			++count.views;
 			count.split += groups_on >= 2 ? 1 : 0;
+			count.unseen += seen(mover) ? 0 : 1;
 			if (groups_on == 0) {
 				++count.missed;
+				count.missed_unseen += seen(mover) ? 0 : 1;
 				count.missed_frames.push_back(result.seq);
 			}
 		}
@@ -333,13 +350,15 @@ std::string group_count_table(const std::string &name, const GroupScore &s)
 	};
 	out << std::fixed << std::setprecision(3);
 	out << "| scene | separated frames | count exact | too many groups | too few | mover views | split (>= 2 "
-	       "groups) | missed (none) | groups | on no mover |\n";
-	out << "|---|---|---|---|---|---|---|---|---|---|\n";
+	       "groups) | missed (none) | groups | on no mover | frames every mover on >= "
+	    << s.seen_min_points << " points | count exact there |\n";
+	out << "|---|---|---|---|---|---|---|---|---|---|---|---|\n";
 	out << "| " << name << " | " << s.frames_separated << " | " << ratio(s.count_exact, s.frames_separated) << " | "
 	    << ratio(s.count_over, s.frames_separated) << " | " << ratio(s.count_under, s.frames_separated) << " | "
 	    << s.separated_mover_views << " | " << ratio(s.separated_movers_split, s.separated_mover_views) << " | "
 	    << ratio(s.separated_movers_missed, s.separated_mover_views) << " | " << s.separated_groups << " | "
-	    << ratio(s.separated_groups_off, s.separated_groups) << " |\n";
+	    << ratio(s.separated_groups_off, s.separated_groups) << " | " << s.frames_seen << " | "
+	    << ratio(s.count_exact_seen, s.frames_seen) << " |\n";
 	return out.str();
 }
 
@@ -368,12 +387,14 @@ std::string group_mover_table(const GroupScore &s)
 {
 	std::ostringstream out;
 	out << std::setprecision(3);
-	out << "| mover (mask id) | separated views | missed | split | speed error (median, all views) | frames missed "
-	       "| id switches (frames) |\n";
-	out << "|---|---|---|---|---|---|---|\n";
+	out << "| mover (mask id) | separated views | on < " << s.seen_min_points << " points | missed | of those on < "
+	    << s.seen_min_points
+	    << " | split | speed error (median, all views) | frames missed | id switches (frames) |\n";
+	out << "|---|---|---|---|---|---|---|---|---|\n";
 	for (const auto &[id, count] : s.by_mover) {
-		out << "| " << id << " | " << count.views << " | " << count.missed << " | " << count.split << " | "
-		    << median(count.speed_relative_error) << " | ";
+		out << "| " << id << " | " << count.views << " | " << count.unseen << " | " << count.missed << " | "
+		    << count.missed_unseen << " | " << count.split << " | " << median(count.speed_relative_error)
+		    << " | ";
 		out << as_runs(count.missed_frames) << " | " << count.id_switch_frames.size();
 		if (!count.id_switch_frames.empty())
 			out << " (" << as_runs(count.id_switch_frames) << ")";

@@ -61,11 +61,19 @@ struct GroupScore {
 	uint64_t count_over = 0, count_under = 0;
 	uint64_t separated_mover_views = 0, separated_movers_split = 0, separated_movers_missed = 0;
 	uint64_t separated_groups = 0, separated_groups_off = 0;
+	/// Of the separated frames, those in which every mover holds at least `seen_min_points` of the frame's
+	/// feature points (any label), and of those the ones with the count exact: the grouping's own count, where
+	/// the detector gave every mover something to group. The rest of the separated frames have a mover the
+	/// feature points do not see (too plain, too far, not yet in from the edge), which no grouping rule mends.
+	uint64_t frames_seen = 0, count_exact_seen = 0;
 	/// Per mover of a reference with ids that hold across frames (TrueMover::metric; group_mover_table). In the
 	/// separated frames, as above: which mover the count lacks, and in which frames.
 	struct MoverCount {
 		uint64_t views = 0, missed = 0, split = 0; ///< separated views only
-		std::vector<uint64_t> missed_frames;	   ///< seq, in order
+		/// Of the separated views, those with fewer than seen_min_points feature points on the mover, and
+		/// how many of the missed ones those are.
+		uint64_t unseen = 0, missed_unseen = 0;
+		std::vector<uint64_t> missed_frames; ///< seq, in order
 		/// Over every view a group covers the mover (separated or not): the relative speed error, and the
 		/// frames where the group on it has another id than the one last on it.
 		std::vector<double> speed_relative_error;
@@ -102,6 +110,7 @@ struct GroupScore {
 	double max_heading_distance_m = 15.0;
 	double min_heading_speed_mps = 0.3;
 	int separation_margin_px = 8;
+	int seen_min_points = 5; ///< GroupScore::frames_seen: a mover holding fewer is not seen (min_points)
 	double inside_share = 0.5;
 };
 

@@ -268,8 +268,45 @@ TEST(GroupEvaluation, HandComputedFrames)
 		<< tools::group_mover_table(score);
 	ASSERT_EQ(score.by_mover[1].speed_relative_error.size(), 7U);
 	EXPECT_NEAR(score.by_mover[1].speed_relative_error[0], 0.1, 1e-6);
-	EXPECT_NE(tools::group_mover_table(score).find("| 2 | 7 | 5 | 0 | 0 | 1, 3-5, 7 | 0 |"), std::string::npos)
+	// No frame so far had a feature point: every view is one of a mover the points do not see.
+	EXPECT_EQ(score.frames_seen, 0U);
+	EXPECT_NE(tools::group_mover_table(score).find("| 2 | 7 | 7 | 5 | 5 | 0 | 0 | 1, 3-5, 7 | 0 |"),
+		  std::string::npos)
 		<< tools::group_mover_table(score);
+
+	// The grouping's own count: frame 8 has 5 points on each mover (labels do not matter) and both groups;
+	// frame 9 has 4 on mover 2, which is missed there, so the frame is not one where every mover is seen.
+	const auto points_on = [](cv::Rect box, int n) {
+		std::vector<LabelledPoint> points;
+		for (int i = 0; i < n; ++i) {
+			LabelledPoint point;
+			point.u = static_cast<float>(box.x + 2 + 3 * i);
+			point.v = static_cast<float>(box.y + 10);
+			point.label = i % 2 == 0 ? PointLabel::Dynamic : PointLabel::Uncertain;
+			points.push_back(point);
+		}
+		return points;
+	};
+	frame.seq = 8;
+	frame.points = points_on({100, 50, 40, 100}, 5);
+	for (const auto &point : points_on({300, 60, 40, 100}, 5))
+		frame.points.push_back(point);
+	frame.groups = mover_1_only;
+	frame.groups.push_back(group_at(10, {300, 60, 40, 100}, 1.0, 0.0, {1, 0, 6}));
+	score.add(frame, mask, movers);
+	frame.seq = 9;
+	frame.points.pop_back();
+	frame.groups = mover_1_only;
+	score.add(frame, mask, movers);
+	EXPECT_EQ(score.frames_separated, 9U);
+	EXPECT_EQ(score.frames_seen, 1U);
+	EXPECT_EQ(score.count_exact_seen, 1U);
+	EXPECT_EQ(score.by_mover[1].unseen, 7U);
+	EXPECT_EQ(score.by_mover[2].unseen, 8U);
+	EXPECT_EQ(score.by_mover[2].missed, 6U);
+	EXPECT_EQ(score.by_mover[2].missed_unseen, 6U);
+	EXPECT_NE(tools::group_count_table("t", score).find("| 1 | 1.000 |"), std::string::npos)
+		<< tools::group_count_table("t", score);
 }
 
 // The still-camera reference (tools/motion_reference.hpp): the median of samples is the empty scene even
