@@ -6,6 +6,7 @@
 #include <fstream>
 #include <iomanip>
 #include <iostream>
+#include <poll.h>
 #include <sys/socket.h>
 #include <sys/un.h>
 #include <thread>
@@ -40,7 +41,7 @@ void on_signal(int)
 	g_interrupted = 1;
 }
 
-/// SIGINT/SIGTERM set g_interrupted and interrupt a blocking recv(): std::signal installs handlers with
+/// SIGINT/SIGTERM set g_interrupted and interrupt a blocking wait: std::signal installs handlers with
 /// SA_RESTART, under which `stereoctl watch` ignored Ctrl-C until data arrived.
 void catch_interrupts()
 {
@@ -73,16 +74,29 @@ int watch(const std::string &socket_path, bool raw, long max_frames, double time
 			  << " (is stereod running? see output.socket)\n";
 		return 1;
 	}
-	if (timeout_s > 0) {
-		timeval tv{static_cast<time_t>(timeout_s),
-			   static_cast<suseconds_t>((timeout_s - static_cast<double>(static_cast<time_t>(timeout_s))) *
-						    1e6)};
-		::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof(tv));
-	}
+	const timespec limit{
+		static_cast<time_t>(timeout_s),
+		static_cast<long>((timeout_s - static_cast<double>(static_cast<time_t>(timeout_s))) * 1e9)};
+	// SIGINT and SIGTERM stay blocked but inside ppoll(), which lets them in only while it waits: one that
+	// comes between the check of g_interrupted and the wait is then taken by the wait (it returns EINTR)
+	// instead of being spent before it, which left a blocking recv() waiting for data that never came.
+	sigset_t interrupts, while_waiting;
+	sigemptyset(&interrupts);
+	sigaddset(&interrupts, SIGINT);
+	sigaddset(&interrupts, SIGTERM);
+	::sigprocmask(SIG_BLOCK, &interrupts, &while_waiting);
+	sigdelset(&while_waiting, SIGINT);
+	sigdelset(&while_waiting, SIGTERM);
 	std::string buffer;
 	char chunk[65536];
 	long frames = 0;
 	while (!g_interrupted) {
+		pollfd readable{fd, POLLIN, 0};
+		const int ready = ::ppoll(&readable, 1, timeout_s > 0 ? &limit : nullptr, &while_waiting);
+		if (ready < 0 && errno == EINTR)
+			continue; // g_interrupted says whether it was ours
+		if (ready <= 0)
+			break; // the timeout (--timeout), or an error
 		const ssize_t n = ::recv(fd, chunk, sizeof(chunk), 0);
 		if (n <= 0)
 			break;
