@@ -231,10 +231,11 @@ void GroupScore::add(const FrameResult &result, const cv::Mat &mask, const std::
 			MoverCount &count = by_mover[mover.id];
 			++count.views;
 			count.split += groups_on >= 2 ? 1 : 0;
-			count.unseen += seen(mover) ? 0 : 1;
+			const bool unseen = !seen(mover);
+			count.unseen += unseen ? 1 : 0;
 			if (groups_on == 0) {
 				++count.missed;
-				count.missed_unseen += seen(mover) ? 0 : 1;
+				count.missed_unseen += unseen ? 1 : 0;
 				count.missed_frames.push_back(result.seq);
 			}
 		}
