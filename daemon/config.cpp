@@ -449,6 +449,14 @@ const std::vector<Option> &options()
 			"matching", "rescue_max_distance",
 			"rescue: largest Hamming distance between the two descriptors; 256 = not looked at",
 			[](DaemonConfig &c) -> int & { return c.motion.matching.rescue_max_distance; }, 1, 256));
+		o.push_back(boolean("matching", "follow_lost",
+				    "a followed corner the detector loses is kept where Lucas-Kanade lands, so its "
+				    "track goes on",
+				    [](DaemonConfig &c) -> bool & { return c.motion.matching.follow_lost; }));
+		o.push_back(number(
+			"matching", "follow_lost_clear_px",
+			"follow_lost: not where a matched keypoint lies this close (that corner is followed already)",
+			[](DaemonConfig &c) -> float & { return c.motion.matching.follow_lost_clear_px; }, 0, 50));
 		// [classifier]
 		o.push_back(number(
 			"classifier", "ransac_threshold_px", "RANSAC inlier distance, pixels",

@@ -320,6 +320,7 @@ void Pipeline::process(Job &job, vision::StageWorkspace &workspace)
 
 	bool promised = false;
 	bool tracks_promised = false;
+	std::shared_ptr<vision::FrameFeatures> features; // this frame's, final once the pair stage returns
 	try {
 		if (job.provides_features && options_.motion.enabled) {
 			// The vision stages see rectified eyes; the pool frame (and what the observer records) keeps
@@ -330,18 +331,21 @@ void Pipeline::process(Job &job, vision::StageWorkspace &workspace)
 				rectified = geometry::rectify_frame(*options_.rectification, frame);
 			}
 			const StereoFrame &input = options_.rectification ? rectified : frame;
-			auto features = std::make_shared<const vision::FrameFeatures>(
+			features = std::make_shared<vision::FrameFeatures>(
 				vision::extract_stage(input, options_.motion, result.timing));
-			job.features.set_value(features);
-			promised = true;
 			// Both wait only for an earlier frame that another worker already holds: no deadlock. The
 			// memory makes the pair stage run in frame order; extraction, the costly part, does not wait.
 			const FeaturesPtr previous = job.previous.valid() ? job.previous.get() : nullptr;
 			const TracksPtr previous_tracks =
 				job.previous_tracks.valid() ? job.previous_tracks.get() : nullptr;
+			// The pair stage may add the corners it follows to this frame's features
+			// (matching.follow_lost), so they go to the next frame only after it: the next frame waits
+			// for this one's memory at the same point anyway.
 			auto tracks = std::make_shared<const vision::TrackSet>(
 				vision::pair_stage(previous.get(), previous_tracks.get(), *features, input,
 						   options_.motion, result, workspace));
+			job.features.set_value(std::move(features));
+			promised = true;
 			job.tracks.set_value(std::move(tracks));
 			tracks_promised = true;
 		}
@@ -351,8 +355,10 @@ void Pipeline::process(Job &job, vision::StageWorkspace &workspace)
 		result.points.clear();
 		result.ego.reset();
 	}
+	// After a failed pair stage the next frame still pairs with these features, starting its memory afresh
+	// (as when they were published before it); the pair stage adds each corner whole.
 	if (job.provides_features && !promised)
-		job.features.set_value(nullptr); // the next frame pairs with nothing rather than waiting forever
+		job.features.set_value(features); // null when extraction failed: the next pairs with nothing
 	if (job.provides_features && !tracks_promised)
 		job.tracks.set_value(nullptr); // and its memory starts afresh
 	if (observer_)

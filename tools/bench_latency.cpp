@@ -277,6 +277,11 @@ int main(int argc, char **argv)
 		->check(CLI::Range(1, 1024));
 	bool default_only = false;
 	app.add_flag("--default-only", default_only, "only the stereo path as configured by default");
+	int follow_lost_pairs = 0;
+	app.add_option("--follow-lost-pairs", follow_lost_pairs,
+		       "only the default stereo path, N times with matching.follow_lost on (the default) and off in "
+		       "turn, to compare the two on a noisy machine")
+		->check(CLI::Range(1, 100));
 	bool cold = false;
 	app.add_flag("--cold", cold,
 		     "every run without the workers' warm-up (PipelineOptions::warm_up), to compare its first frames");
@@ -311,6 +316,16 @@ int main(int argc, char **argv)
 		    "pipeline", "fps", "CPU ms", "p50 ms", "p90 ms", "p99 ms", "max ms", "1st 10", "ring", "pool",
 		    "extr.", "stereo", "match", "class.", "pose", "flow", "groups");
 	std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+	vision::MatchParams no_follow_lost;
+	no_follow_lost.follow_lost = false;
+	if (follow_lost_pairs > 0) {
+		for (int i = 0; i < follow_lost_pairs; ++i) {
+			row("stereo + pose (default)", run(config, Path::Stereo, seconds, workers));
+			row("stereo + pose, no follow_lost", run(config, Path::Stereo, seconds, workers, Publish::None,
+								 vision::GroupFlow::Sparse, {}, no_follow_lost));
+		}
+		return 0;
+	}
 	if (default_only) {
 		row("stereo + pose (default)", run(config, Path::Stereo, seconds, workers));
 		return 0;
@@ -338,6 +353,10 @@ int main(int argc, char **argv)
 	no_rescue.rescue = false;
 	row("stereo + pose, no rescue",
 	    run(config, Path::Stereo, seconds, workers, Publish::None, vision::GroupFlow::Sparse, {}, no_rescue));
+	// Corners the detector loses, kept where Lucas-Kanade follows them (matching.follow_lost, on by default;
+	// in the match column too).
+	row("stereo + pose, no follow_lost",
+	    run(config, Path::Stereo, seconds, workers, Publish::None, vision::GroupFlow::Sparse, {}, no_follow_lost));
 	if (with_flow) {
 		row("stereo, groups.flow = lk",
 		    run(config, Path::Stereo, seconds, workers, Publish::None, vision::GroupFlow::PyrLk));

@@ -50,6 +50,9 @@ struct FrameFeatures {
 	/// extract stage, which runs beside other frames', so the rescue and the sub-pixel step in the serial pair
 	/// stage do not build it.
 	std::vector<cv::Mat> grey_pyramid;
+	/// The right image in grey, with stereo and matching.follow_lost: the pair stage measures the depth of the
+	/// corners it keeps by Lucas-Kanade on it (the extract stage made it; the pair stage runs serially).
+	cv::Mat right_grey;
 	/// The grey left image scaled for the dense flow (dense_motion.hpp), when the groups use it.
 	cv::Mat flow_image;
 	/// Per cell of the dense flow's grid: the depth from this frame's 3D points (dense_motion.hpp); empty

@@ -461,13 +461,17 @@ int rescue_matches(const FrameFeatures &prev, const FrameFeatures &cur, std::spa
 
 std::vector<FollowedPoint> follow_unmatched(const FrameFeatures &prev, const FrameFeatures &cur,
 					    std::span<const cv::Point2f> predicted, std::span<const Match> matches,
-					    const MatchParams &params, double aperture_ratio)
+					    const MatchParams &params, double aperture_ratio,
+					    std::span<const uint8_t> wanted)
 {
 	if (prev.grey.empty() || cur.grey.empty() || prev.grey.size() != cur.grey.size() || prev.keypoints.empty())
 		return {};
-	std::vector<uint8_t> matched(prev.keypoints.size(), 0);
+	std::vector<uint8_t> matched(prev.keypoints.size(), 0); // 1: not to be followed
 	for (const Match &m : matches)
 		matched[static_cast<size_t>(m.prev)] = 1;
+	if (wanted.size() == prev.keypoints.size())
+		for (size_t i = 0; i < matched.size(); ++i)
+			matched[i] |= wanted[i] == 0 ? 1 : 0;
 	const bool use_prediction = predicted.size() == prev.keypoints.size();
 	std::vector<int> index;
 	std::vector<cv::Point2f> from, to;
@@ -505,6 +509,33 @@ std::vector<FollowedPoint> follow_unmatched(const FrameFeatures &prev, const Fra
 		followed.push_back({index[k], to[k], across});
 	}
 	return followed;
+}
+
+std::vector<FollowedPoint> lost_corners(std::span<const FollowedPoint> followed, const FrameFeatures &cur,
+					std::span<const Match> matches, float clear_px)
+{
+	// The matched keypoints by row, so each followed point looks only at those within clear_px of its row.
+	std::vector<cv::Point2f> taken;
+	taken.reserve(matches.size());
+	for (const Match &m : matches)
+		taken.push_back(cur.keypoints[static_cast<size_t>(m.cur)].pt);
+	std::sort(taken.begin(), taken.end(), [](cv::Point2f a, cv::Point2f b) { return a.y < b.y; });
+	const float clear2 = clear_px * clear_px;
+	const auto followed_already = [&](cv::Point2f at) {
+		auto it = std::lower_bound(taken.begin(), taken.end(), at.y - clear_px,
+					   [](cv::Point2f p, float y) { return p.y < y; });
+		for (; it != taken.end() && it->y <= at.y + clear_px; ++it) {
+			const cv::Point2f d = *it - at;
+			if (d.dot(d) < clear2)
+				return true;
+		}
+		return false;
+	};
+	std::vector<FollowedPoint> kept;
+	for (const FollowedPoint &f : followed)
+		if (f.across == cv::Point2f(0, 0) && !followed_already(f.at))
+			kept.push_back(f);
+	return kept;
 }
 
 int refine_matches(const FrameFeatures &prev, const FrameFeatures &cur, std::span<const cv::Point2f> prev_pts,

@@ -65,6 +65,80 @@ bool follows_unmatched(const MotionParams &params, bool metric)
 	       (params.matching.rescue || params.matching.subpixel);
 }
 
+/// A lost corner continues a track only once it is a frame old: a keypoint matched nowhere yet may be a
+/// one-frame look-alike, and following it would start a chain.
+constexpr uint32_t kLostCornerMinAge = 1;
+/// How far from its predecessor's disparity a lost corner's is searched. A mover 2 m away closing at 2 m/s
+/// changes its disparity by about 2 px a frame at 30 fps (f b = 111 px m: the sim at 1024 px wide, a 12 cm
+/// baseline).
+constexpr double kLostCornerDisparitySlackPx = 8;
+
+/// Keeps the lost corners among `followed` (lost_corners; only those whose track is kLostCornerMinAge old) as
+/// keypoints of `cur`: the previous keypoint's size, angle and descriptor at the place Lucas-Kanade found, this
+/// frame's colour there and, where the frame has depth, its depth there. A corner with no clean depth in a frame that
+/// has depth is not kept: at a mover's outline the window straddles its edge, and a point without depth takes no part
+/// in the metric tests. Appends the matches that continue the tracks and takes the kept points out of `followed`.
+void keep_lost_corners(const FrameFeatures &prev, const TrackSet &prev_tracks, FrameFeatures &cur,
+		       const StereoFrame &frame, const MotionParams &params, std::vector<FollowedPoint> &followed,
+		       std::vector<Match> &matches)
+{
+	std::vector<FollowedPoint> old_enough;
+	for (const FollowedPoint &f : followed)
+		if (prev_tracks.by_keypoint[static_cast<size_t>(f.prev)].age >= kLostCornerMinAge)
+			old_enough.push_back(f);
+	const std::vector<FollowedPoint> lost =
+		lost_corners(old_enough, cur, matches, params.matching.follow_lost_clear_px);
+	if (lost.empty())
+		return;
+	const bool has_depth = !cur.xyz.empty() && params.rig;
+	const bool from_stereo = has_depth && !frame.right.empty() && params.stereo.enabled;
+	const cv::Mat right_grey = from_stereo && cur.right_grey.empty() ? grey_of(frame.right) : cur.right_grey;
+	const bool on_edge_kept = cur.depth_on_edge.size() == cur.xyz.size();
+	RowSearchBuffers buffers;
+	std::vector<int> kept_prev;
+	for (const FollowedPoint &f : lost) {
+		const auto p = static_cast<size_t>(f.prev);
+		cv::KeyPoint keypoint = prev.keypoints[p];
+		keypoint.pt = f.at;
+		std::optional<cv::Vec3f> xyz;
+		if (from_stereo) {
+			// Searched near the predecessor's disparity where it had one: a frame apart the point's
+			// depth changes little, and a look-alike farther along the row is no candidate.
+			StereoParams around = params.stereo;
+			if (p < prev.xyz.size() && prev.xyz[p][2] > 0) {
+				const double d = params.rig->fx * params.rig->baseline_m / prev.xyz[p][2];
+				around.min_disparity_px =
+					std::max(params.stereo.min_disparity_px, d - kLostCornerDisparitySlackPx);
+				around.max_disparity_px =
+					std::min(params.stereo.max_disparity_px, d + kLostCornerDisparitySlackPx);
+			}
+			xyz = clean_row_depth(cur.grey, right_grey, f.at, *params.rig, around, buffers);
+		} else if (has_depth && !frame.depth.empty())
+			if (const cv::Vec3f q = points_from_depth({keypoint}, frame.depth, *params.rig)[0];
+			    std::isfinite(q[2]))
+				xyz = q;
+		if (has_depth && !xyz)
+			continue;
+		// All of the corner is measured before any of it is added: a failure leaves `cur` consistent.
+		const cv::Vec3f colour = sample_colour(frame.left, f.at, params.classifier.colour_radius);
+		const int index = static_cast<int>(cur.keypoints.size());
+		cur.keypoints.push_back(keypoint);
+		cur.descriptors.push_back(prev.descriptors.row(static_cast<int>(p)));
+		cur.colours.push_back(colour);
+		if (has_depth) {
+			cur.xyz.push_back(*xyz);
+			if (on_edge_kept)
+				cur.depth_on_edge.push_back(0);
+		}
+		matches.push_back({f.prev, index, 0});
+		kept_prev.push_back(f.prev);
+	}
+	std::sort(kept_prev.begin(), kept_prev.end());
+	std::erase_if(followed, [&](const FollowedPoint &f) {
+		return std::binary_search(kept_prev.begin(), kept_prev.end(), f.prev);
+	});
+}
+
 /// Whether `at` lies inside one of the published groups' boxes.
 bool inside_a_box(cv::Point2f at, const std::vector<TargetGroup> &groups)
 {
@@ -282,6 +356,9 @@ FrameFeatures extract_stage(const StereoFrame &frame, const MotionParams &params
 	StageTimer timer(timing, "stereo");
 	if (right_grey.empty())
 		right_grey = grey_of(frame.right);
+	if (params.matching.follow_lost && follows_by_image)
+		// As the left: a grey frame's image is a pool buffer.
+		features.right_grey = right_grey.data == frame.right.data ? right_grey.clone() : right_grey;
 	const double scale_step = params.features.detector == Detector::Orb ? params.features.orb_scale : 1.4;
 	StereoDepth depth = match_stereo(features, right, grey, right_grey, *params.rig, params.stereo, scale_step);
 	features.xyz = std::move(depth.xyz);
@@ -293,7 +370,7 @@ FrameFeatures extract_stage(const StereoFrame &frame, const MotionParams &params
 	return features;
 }
 
-TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, const FrameFeatures &cur,
+TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, FrameFeatures &cur,
 		    const StereoFrame &frame, const MotionParams &params, FrameResult &result,
 		    StageWorkspace &workspace)
 {
@@ -338,11 +415,28 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, cons
 			StageTimer rescue_timer(result.timing, "rescue");
 			rescue_matches(*prev, cur, prediction, matches, params.matching);
 		}
-		if (follows_unmatched(params, metric)) {
+		const bool keeps_lost = params.matching.follow_lost && prev_tracks != nullptr &&
+					prev_tracks->by_keypoint.size() == prev->keypoints.size();
+		if (keeps_lost || follows_unmatched(params, metric)) {
 			StageTimer follow_timer(result.timing, "follow");
+			// Without the groups' use of them, only the points a lost corner may continue are followed:
+			// those whose track is a frame old (keep_lost_corners).
+			std::vector<uint8_t> wanted;
+			if (!follows_unmatched(params, metric)) {
+				wanted.resize(prev->keypoints.size());
+				for (size_t i = 0; i < wanted.size(); ++i)
+					wanted[i] = prev_tracks->by_keypoint[i].age >= kLostCornerMinAge ? 1 : 0;
+			}
 			followed = follow_unmatched(*prev, cur, prediction, matches, params.matching,
-						    params.dense.aperture_ratio);
+						    params.dense.aperture_ratio, wanted);
 		}
+		if (keeps_lost && !followed.empty()) {
+			StageTimer lost_timer(result.timing, "follow_lost");
+			keep_lost_corners(*prev, *prev_tracks, cur, frame, params, followed, matches);
+			follow.cur_keypoints = cur.keypoints.size();
+		}
+		if (!follows_unmatched(params, metric))
+			followed.clear();
 	}
 	const size_t n = matches.size();
 	std::vector<PointPair> pairs;

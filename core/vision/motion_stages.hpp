@@ -62,8 +62,9 @@ struct StageWorkspace {
 /// appends "match", "classify" (and "pose"), and returns frame n's memory for the next call. With no previous
 /// frame (the first one, or after a gap the caller chose not to bridge) points stay empty and the memory
 /// starts afresh; `prev_tracks` null with `prev` set means the previous memory was lost, and it starts afresh
-/// too. A stereo frame's ego then has the identity pose as the world's origin.
-TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, const FrameFeatures &cur,
+/// too. A stereo frame's ego then has the identity pose as the world's origin. With matching.follow_lost it
+/// grows `cur` by the lost corners it keeps, so frame n's features are final only once it returns.
+TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, FrameFeatures &cur,
 		    const StereoFrame &frame, const MotionParams &params, FrameResult &result,
 		    StageWorkspace &workspace);
 

@@ -370,6 +370,21 @@ float row_offset(const cv::Mat &left_grey, const cv::Mat &right_grey, cv::Point2
 	return static_cast<float>(-dy);
 }
 
+std::optional<cv::Vec3f> clean_row_depth(const cv::Mat &left_grey, const cv::Mat &right_grey, cv::Point2f left_pt,
+					 const geometry::StereoRig &rig, const StereoParams &params,
+					 RowSearchBuffers &buffers)
+{
+	bool straddles = false;
+	const float d = search_row(left_grey, right_grey, left_pt, params, buffers, &straddles);
+	if (straddles || !(d >= static_cast<float>(params.min_disparity_px)) ||
+	    d > static_cast<float>(params.max_disparity_px))
+		return std::nullopt;
+	const auto p = rig.triangulate(left_pt.x, left_pt.y, d);
+	if (!p)
+		return std::nullopt;
+	return cv::Vec3f(static_cast<float>((*p)[0]), static_cast<float>((*p)[1]), static_cast<float>((*p)[2]));
+}
+
 namespace {
 
 /// Left keypoint i's disparity and 3D point into `out`, when the disparity is in range and triangulates (and,

@@ -12,6 +12,7 @@
 // looked for along their row of the right image by correlation (search_row), unless row_search is off.
 #include <cmath>
 #include <cstdint>
+#include <optional>
 #include <vector>
 
 #include <opencv2/core.hpp>
@@ -102,6 +103,13 @@ struct RowSearchBuffers {
 };
 float search_row(const cv::Mat &left_grey, const cv::Mat &right_grey, cv::Point2f left_pt, const StereoParams &params,
 		 RowSearchBuffers &buffers, bool *straddles = nullptr);
+
+/// The left-camera 3D point at `left_pt` from search_row, only where it is clean: a disparity in range whose
+/// window does not straddle a depth edge, and that triangulates. For points found after the stereo matching
+/// (a corner followed into the frame by Lucas-Kanade), whose depth nothing else checks.
+std::optional<cv::Vec3f> clean_row_depth(const cv::Mat &left_grey, const cv::Mat &right_grey, cv::Point2f left_pt,
+					 const geometry::StereoRig &rig, const StereoParams &params,
+					 RowSearchBuffers &buffers);
 
 /// Calibration health: v_left - v_right at a stereo match, to a fraction of a pixel (the SAD minimum over
 /// rows -2..2 of the right image at the matched disparity, and a V fit). NaN near the image border.

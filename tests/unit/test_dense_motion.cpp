@@ -12,6 +12,7 @@
 
 #include "core/vision/dense_motion.hpp"
 #include "core/vision/groups.hpp"
+#include "test_images.hpp"
 
 using namespace stereod;
 using namespace stereod::vision;
@@ -21,22 +22,10 @@ namespace {
 /// Smoothed noise: texture at every scale LK and DIS look at.
 cv::Mat texture(cv::Size size, unsigned seed)
 {
-	cv::Mat noise(size, CV_8U);
-	cv::RNG rng(seed);
-	rng.fill(noise, cv::RNG::UNIFORM, 0, 256);
-	cv::Mat smooth;
-	cv::GaussianBlur(noise, smooth, cv::Size(0, 0), 1.5);
-	cv::normalize(smooth, smooth, 0, 255, cv::NORM_MINMAX);
-	return smooth;
+	return test::smoothed_noise(size, seed, 1.5);
 }
 
-cv::Mat shifted(const cv::Mat &image, cv::Point2f by)
-{
-	const cv::Matx23d m(1, 0, by.x, 0, 1, by.y);
-	cv::Mat out;
-	cv::warpAffine(image, out, m, image.size(), cv::INTER_LINEAR, cv::BORDER_REFLECT);
-	return out;
-}
+using test::shifted;
 
 /// Median of the measured cells' flow, over the cells at least `margin` cells from the border.
 cv::Point2f median_flow(const CellFlow &cells, int margin, size_t &measured, size_t &interior)

@@ -3,6 +3,7 @@
 #include <cmath>
 #include <numbers>
 #include <random>
+#include <utility>
 
 #include <gtest/gtest.h>
 #include <opencv2/imgproc.hpp>
@@ -514,23 +515,35 @@ TEST(Stereo, RefinesDisparityToAFractionOfAPixel)
 	EXPECT_TRUE(std::isnan(refine_disparity(left, right, {2, 50}, 10, 2, 5)));
 }
 
+namespace {
+
+/// A 200x100 stereo pair: a near textured surface (disparity `near`) left of column `edge` beside a farther one
+/// (`far`), at the near one's right edge, where the right eye sees the far one uncovered.
+std::pair<cv::Mat, cv::Mat> depth_edge_pair(int edge, int far, int near)
+{
+	const cv::Mat far_surface = texture(200, 100, 21), near_surface = texture(200, 100, 22);
+	cv::Mat left(100, 200, CV_8UC1), right(100, 200, CV_8UC1);
+	for (int y = 0; y < 100; ++y)
+		for (int x = 0; x < 200; ++x) {
+			left.at<uint8_t>(y, x) =
+				x < edge ? near_surface.at<uint8_t>(y, x) : far_surface.at<uint8_t>(y, x);
+			right.at<uint8_t>(y, x) = x + near < edge ? near_surface.at<uint8_t>(y, x + near)
+								  : far_surface.at<uint8_t>(y, std::min(199, x + far));
+		}
+	return {left, right};
+}
+
+} // namespace
+
 // A window across a depth edge holds two disparities: a near textured surface (disparity 14, left of column 100)
 // beside a farther one (11), at the near one's right edge, where the right eye sees the far one uncovered. With
 // stereo.edge_split_px the point whose window straddles the edge is marked; points wholly on either surface are
 // not.
 TEST(Stereo, AWindowAcrossADepthEdgeIsMarked)
 {
-	const cv::Mat far_surface = texture(200, 100, 21), near_surface = texture(200, 100, 22);
 	constexpr int kEdge = 100, kFar = 11, kNear = 14;
-	cv::Mat left(100, 200, CV_8UC1), right(100, 200, CV_8UC1);
-	for (int y = 0; y < 100; ++y)
-		for (int x = 0; x < 200; ++x) {
-			left.at<uint8_t>(y, x) =
-				x < kEdge ? near_surface.at<uint8_t>(y, x) : far_surface.at<uint8_t>(y, x);
-			right.at<uint8_t>(y, x) = x + kNear < kEdge
-							  ? near_surface.at<uint8_t>(y, x + kNear)
-							  : far_surface.at<uint8_t>(y, std::min(199, x + kFar));
-		}
+	const std::pair<cv::Mat, cv::Mat> pair = depth_edge_pair(kEdge, kFar, kNear);
+	const cv::Mat &left = pair.first, &right = pair.second;
 	const auto straddles = [&](float u, int d, double split) {
 		bool across = false;
 		const float refined =
@@ -548,6 +561,32 @@ TEST(Stereo, AWindowAcrossADepthEdgeIsMarked)
 	// Halves that agree within the threshold pass: a wide one lets this window through, and 0 is no test.
 	EXPECT_FALSE(straddles(kEdge, (kNear + kFar) / 2, 5.0));
 	EXPECT_FALSE(straddles(kEdge, (kNear + kFar) / 2, 0));
+}
+
+// The depth of a point found after the stereo matching (a corner followed by Lucas-Kanade) is kept only when
+// clean: on either surface of the same depth edge it is that surface's; across the edge there is none.
+TEST(Stereo, CleanRowDepthRefusesAWindowAcrossADepthEdge)
+{
+	constexpr int kEdge = 100, kFar = 11, kNear = 14;
+	const std::pair<cv::Mat, cv::Mat> pair = depth_edge_pair(kEdge, kFar, kNear);
+	const cv::Mat &left = pair.first, &right = pair.second;
+	StereoParams params;
+	params.min_disparity_px = 2;
+	params.max_disparity_px = 40;
+	RowSearchBuffers buffers;
+	const auto near_point = clean_row_depth(left, right, {60, 50}, kRig, params, buffers);
+	ASSERT_TRUE(near_point.has_value());
+	EXPECT_NEAR((*near_point)[2], kRig.depth(kNear), kRig.depth(kNear) * 0.01);
+	const auto far_point = clean_row_depth(left, right, {150, 50}, kRig, params, buffers);
+	ASSERT_TRUE(far_point.has_value());
+	EXPECT_NEAR((*far_point)[2], kRig.depth(kFar), kRig.depth(kFar) * 0.01);
+	EXPECT_NEAR((*far_point)[0], (150 - kRig.cx) * (*far_point)[2] / kRig.fx, 1e-3);
+	EXPECT_FALSE(clean_row_depth(left, right, {kEdge, 50}, kRig, params, buffers).has_value());
+	const cv::Mat flat(100, 200, CV_8UC1, cv::Scalar(90));
+	EXPECT_FALSE(clean_row_depth(flat, flat, {60, 50}, kRig, params, buffers).has_value());
+	// Outside the disparity range there is no depth either.
+	params.max_disparity_px = 10;
+	EXPECT_FALSE(clean_row_depth(left, right, {60, 50}, kRig, params, buffers).has_value());
 }
 
 TEST(Stereo, MatchesConstructedPairAndMeasuresDepthAndRowHealth)

@@ -260,8 +260,8 @@ TEST(PriorModel, TheSegmenterDrivesThePriorThroughTheStages)
 	params.prior.model =
 		std::make_shared<const PriorModel>(fixture("colour_segmenter.onnx"), params.prior.model_spec);
 	std::vector<stereod::StageTime> timing;
-	const FrameFeatures a = extract_stage(f0, params, timing);
-	const FrameFeatures b = extract_stage(f1, params, timing);
+	FrameFeatures a = extract_stage(f0, params, timing);
+	FrameFeatures b = extract_stage(f1, params, timing);
 	ASSERT_TRUE(b.people.has_value());
 	stereod::FrameResult first, second;
 	StageWorkspace workspace;
