@@ -1,6 +1,8 @@
 // The pair stage's following of corners the detector loses (matching.follow_lost), on constructed data.
 #include <gtest/gtest.h>
 
+#include <array>
+
 #include <opencv2/imgproc.hpp>
 
 #include "core/vision/matching.hpp"
@@ -28,6 +30,8 @@ FrameFeatures without(const FrameFeatures &features, const std::vector<uint8_t> 
 	FrameFeatures kept = features;
 	kept.keypoints.clear();
 	kept.colours.clear();
+	kept.xyz.clear();
+	kept.depth_on_edge.clear();
 	kept.descriptors = cv::Mat();
 	for (size_t i = 0; i < features.keypoints.size(); ++i) {
 		if (drop[i] != 0)
@@ -35,8 +39,40 @@ FrameFeatures without(const FrameFeatures &features, const std::vector<uint8_t> 
 		kept.keypoints.push_back(features.keypoints[i]);
 		kept.colours.push_back(features.colours[i]);
 		kept.descriptors.push_back(features.descriptors.row(static_cast<int>(i)));
+		if (i < features.xyz.size())
+			kept.xyz.push_back(features.xyz[i]);
+		if (i < features.depth_on_edge.size())
+			kept.depth_on_edge.push_back(features.depth_on_edge[i]);
 	}
 	return kept;
+}
+
+/// Three frames' features through the pair stage in order, the third's detector having lost every corner inside
+/// `region` (taken out of its features before).
+struct LostRun {
+	TrackSet t1, t2;
+	std::array<FrameResult, 3> results;
+	size_t kept_detected = 0;	  ///< the third frame's keypoints left; those the pair stage added follow
+	std::vector<cv::Point2f> dropped; ///< where the lost corners were
+};
+
+LostRun lose_region_and_pair(std::array<FrameFeatures, 3> &features, const std::array<StereoFrame, 3> &frames,
+			     const MotionParams &params, const cv::Rect2f &region)
+{
+	LostRun run;
+	std::vector<uint8_t> drop(features[2].keypoints.size(), 0);
+	for (size_t i = 0; i < drop.size(); ++i)
+		if (region.contains(features[2].keypoints[i].pt)) {
+			drop[i] = 1;
+			run.dropped.push_back(features[2].keypoints[i].pt);
+		}
+	features[2] = without(features[2], drop);
+	run.kept_detected = features[2].keypoints.size();
+	StageWorkspace workspace;
+	const TrackSet t0 = pair_stage(nullptr, nullptr, features[0], frames[0], params, run.results[0], workspace);
+	run.t1 = pair_stage(&features[0], &t0, features[1], frames[1], params, run.results[1], workspace);
+	run.t2 = pair_stage(&features[1], &run.t1, features[2], frames[2], params, run.results[2], workspace);
+	return run;
 }
 
 } // namespace
@@ -88,23 +124,11 @@ TEST(PairStage, CornersTheDetectorLosesAreFollowedOn)
 			features[k] = extract_stage(frames[k], params, timing);
 		// The third frame's detector loses every corner in the middle of the image.
 		const cv::Rect2f region(140, 100, 200, 160);
-		const size_t detected = features[2].keypoints.size();
-		std::vector<uint8_t> drop(detected, 0);
-		std::vector<cv::Point2f> dropped;
-		for (size_t i = 0; i < detected; ++i) {
-			const cv::Point2f at = features[2].keypoints[i].pt;
-			if (!region.contains(at))
-				continue;
-			drop[i] = 1;
-			dropped.push_back(at);
-		}
-		features[2] = without(features[2], drop);
-		const size_t kept_detected = features[2].keypoints.size();
-		StageWorkspace workspace;
-		FrameResult r0, r1, r2;
-		const TrackSet t0 = pair_stage(nullptr, nullptr, features[0], frames[0], params, r0, workspace);
-		const TrackSet t1 = pair_stage(&features[0], &t0, features[1], frames[1], params, r1, workspace);
-		const TrackSet t2 = pair_stage(&features[1], &t1, features[2], frames[2], params, r2, workspace);
+		const LostRun lost_run = lose_region_and_pair(features, frames, params, region);
+		const size_t kept_detected = lost_run.kept_detected;
+		const TrackSet &t2 = lost_run.t2;
+		const FrameResult &r2 = lost_run.results[2];
+		const std::vector<cv::Point2f> &dropped = lost_run.dropped;
 		// The grown features stay one record per keypoint, and the memory covers every one of them.
 		const FrameFeatures &grown = features[2];
 		EXPECT_EQ(static_cast<size_t>(grown.descriptors.rows), grown.keypoints.size());
@@ -142,4 +166,67 @@ TEST(PairStage, CornersTheDetectorLosesAreFollowedOn)
 	// With it most are: those whose track was a frame old (matched from the first frame to the second).
 	EXPECT_GT(found_on, lost_on * 6 / 10);
 	EXPECT_GE(added + found_off, found_on);
+}
+
+// The same with a calibrated stereo pair of a plane 5 m away (a 10 px disparity): a followed corner keeps its
+// track's id, gets the plane's depth from the row search, and keeps the static scene's label.
+TEST(PairStage, ALostCornerKeepsItsTrackDepthAndLabel)
+{
+	const cv::Size size(480, 360);
+	const geometry::StereoRig rig{500, 500, 240, 180, 0.1};
+	const double disparity = 10, depth = rig.depth(disparity);
+	const cv::Point2f step(3.4F, -1.8F);
+	const cv::Mat scene = texture(size, 11);
+	std::array<StereoFrame, 3> frames;
+	for (size_t k = 0; k < frames.size(); ++k) {
+		frames[k].left = shifted(scene, step * static_cast<float>(k));
+		frames[k].right = shifted(frames[k].left, {static_cast<float>(-disparity), 0});
+		frames[k].sequence = k;
+		frames[k].device_ns = static_cast<int64_t>(k) * 100'000'000;
+	}
+	MotionParams params;
+	params.features.max_features = 600;
+	params.rig = rig;
+	std::vector<StageTime> timing;
+	std::array<FrameFeatures, 3> features;
+	for (size_t k = 0; k < 3; ++k)
+		features[k] = extract_stage(frames[k], params, timing);
+	ASSERT_EQ(features[2].xyz.size(), features[2].keypoints.size());
+	const cv::Rect2f region(140, 100, 200, 160);
+	const LostRun run = lose_region_and_pair(features, frames, params, region);
+	const size_t kept_detected = run.kept_detected;
+	const TrackSet &t1 = run.t1, &t2 = run.t2;
+	const FrameResult &r2 = run.results[2];
+	const FrameFeatures &grown = features[2];
+	ASSERT_EQ(grown.xyz.size(), grown.keypoints.size());
+	ASSERT_EQ(grown.depth_on_edge.size(), grown.keypoints.size());
+	ASSERT_EQ(t2.by_keypoint.size(), grown.keypoints.size());
+	size_t in_region = 0, same_track = 0;
+	for (size_t c = kept_detected; c < grown.keypoints.size(); ++c) {
+		const cv::Point2f at = grown.keypoints[c].pt;
+		in_region += region.contains(at) ? 1 : 0;
+		EXPECT_NEAR(grown.xyz[c][2], depth, depth * 0.02) << "at " << at;
+		EXPECT_EQ(grown.depth_on_edge[c], 0);
+		// The predecessor: the keypoint of the frame before that the image moved here. Its track goes on.
+		for (size_t p = 0; p < features[1].keypoints.size(); ++p)
+			if (cv::norm(features[1].keypoints[p].pt + step - at) < 0.3 &&
+			    t1.by_keypoint[p].id == t2.by_keypoint[c].id && t2.by_keypoint[c].id != 0) {
+				++same_track;
+				break;
+			}
+	}
+	const size_t added = grown.keypoints.size() - kept_detected;
+	EXPECT_GT(in_region, 60U); // measured: 94 here, and all 129 added corners on their track
+	EXPECT_EQ(same_track, added);
+	// Their points are published with the plane's depth, and none is dynamic: the scene is one rigid plane.
+	size_t published = 0;
+	for (const LabelledPoint &point : r2.points) {
+		if (!region.contains({point.u, point.v}))
+			continue;
+		++published;
+		EXPECT_NE(point.label, PointLabel::Dynamic) << point.u << ", " << point.v;
+		ASSERT_TRUE(point.xyz_m.has_value());
+		EXPECT_NEAR((*point.xyz_m)[2], depth, depth * 0.02);
+	}
+	EXPECT_GE(published, in_region * 9 / 10);
 }
