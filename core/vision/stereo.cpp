@@ -370,19 +370,32 @@ float row_offset(const cv::Mat &left_grey, const cv::Mat &right_grey, cv::Point2
 	return static_cast<float>(-dy);
 }
 
+namespace {
+
+/// The left-camera 3D point at `pt` for disparity `d`, when `d` is in [min_disparity_px, max_disparity_px] and
+/// triangulates; nothing otherwise (NaN included).
+std::optional<cv::Vec3f> point_at_disparity(cv::Point2f pt, float d, const geometry::StereoRig &rig,
+					    const StereoParams &params)
+{
+	if (!(d >= static_cast<float>(params.min_disparity_px)) || d > static_cast<float>(params.max_disparity_px))
+		return std::nullopt;
+	const auto p = rig.triangulate(pt.x, pt.y, d);
+	if (!p)
+		return std::nullopt;
+	return cv::Vec3f(static_cast<float>((*p)[0]), static_cast<float>((*p)[1]), static_cast<float>((*p)[2]));
+}
+
+} // namespace
+
 std::optional<cv::Vec3f> clean_row_depth(const cv::Mat &left_grey, const cv::Mat &right_grey, cv::Point2f left_pt,
 					 const geometry::StereoRig &rig, const StereoParams &params,
 					 RowSearchBuffers &buffers)
 {
 	bool straddles = false;
 	const float d = search_row(left_grey, right_grey, left_pt, params, buffers, &straddles);
-	if (straddles || !(d >= static_cast<float>(params.min_disparity_px)) ||
-	    d > static_cast<float>(params.max_disparity_px))
+	if (straddles)
 		return std::nullopt;
-	const auto p = rig.triangulate(left_pt.x, left_pt.y, d);
-	if (!p)
-		return std::nullopt;
-	return cv::Vec3f(static_cast<float>((*p)[0]), static_cast<float>((*p)[1]), static_cast<float>((*p)[2]));
+	return point_at_disparity(left_pt, d, rig, params);
 }
 
 namespace {
@@ -392,15 +405,13 @@ namespace {
 bool store_depth(size_t i, cv::Point2f pt, float d, bool straddles, const geometry::StereoRig &rig,
 		 const StereoParams &params, StereoDepth &out)
 {
-	if (!(d >= static_cast<float>(params.min_disparity_px)) || d > static_cast<float>(params.max_disparity_px))
-		return false;
 	if (straddles && params.drop_edge_depth)
 		return false;
-	const auto p = rig.triangulate(pt.x, pt.y, d);
-	if (!p)
+	const std::optional<cv::Vec3f> point = point_at_disparity(pt, d, rig, params);
+	if (!point)
 		return false;
 	out.disparity[i] = d;
-	out.xyz[i] = cv::Vec3f(static_cast<float>((*p)[0]), static_cast<float>((*p)[1]), static_cast<float>((*p)[2]));
+	out.xyz[i] = *point;
 	out.on_edge[i] = straddles ? 1 : 0;
 	return true;
 }
