@@ -164,6 +164,11 @@ std::string frame_message(const FrameResult &result)
 			g["speed_mps"] = round_to(*group.speed_mps, 0.001);
 		if (group.heading_rad)
 			g["heading_rad"] = round_to(*group.heading_rad, 0.001);
+		if (group.velocity_sigma_mps)
+			g["velocity_sigma_mps"] = {round_to((*group.velocity_sigma_mps)[0], 0.001),
+						   round_to((*group.velocity_sigma_mps)[1], 0.001)};
+		if (group.speed_sigma_mps)
+			g["speed_sigma_mps"] = round_to(*group.speed_sigma_mps, 0.001);
 		if (!group.class_name.empty())
 			g["class"] = group.class_name;
 		groups.push_back(std::move(g));
@@ -343,6 +348,10 @@ FrameResult parse_frame_message(const json &message)
 			group.speed_mps = field<double>(g, "speed_mps");
 		if (g.contains("heading_rad"))
 			group.heading_rad = field<double>(g, "heading_rad");
+		if (g.contains("velocity_sigma_mps"))
+			group.velocity_sigma_mps = array_field<double, 2>(g.at("velocity_sigma_mps"));
+		if (g.contains("speed_sigma_mps"))
+			group.speed_sigma_mps = field<double>(g, "speed_sigma_mps");
 		group.class_name = g.value("class", std::string());
 		result.groups.push_back(group);
 	}
@@ -519,6 +528,8 @@ std::string_view frame_json_schema()
           "world_velocity_mps": {"type": "array", "items": {"type": "number"}},
           "speed_mps": {"type": "number"},
           "heading_rad": {"type": "number"},
+          "velocity_sigma_mps": {"type": "array", "items": {"type": "number"}, "minItems": 2, "maxItems": 2},
+          "speed_sigma_mps": {"type": "number"},
           "class": {"type": "string"}
         }
       }

@@ -89,6 +89,11 @@ struct TargetGroup {
 	std::optional<std::array<double, 3>> world_velocity_mps;
 	std::optional<double> speed_mps;
 	std::optional<double> heading_rad;
+	/// One standard deviation of the world velocity's estimate along the line of sight to the group and
+	/// across it (each axis normal to it), and of the speed, from the spread of the group's own per-frame
+	/// measurements: a young or far group's speed along the sight is the least sure.
+	std::optional<std::array<double, 2>> velocity_sigma_mps;
+	std::optional<double> speed_sigma_mps;
 	/// With the person prior on: "person" when most of the group's points lie in a person region, else
 	/// "unknown"; empty (not sent) with the prior off.
 	std::string class_name;

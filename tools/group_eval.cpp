@@ -295,6 +295,9 @@ void GroupScore::add(const FrameResult &result, const cv::Mat &mask, const std::
 			const double error = std::abs(*best->speed_mps - true_speed) / true_speed;
 			speed_relative_error.push_back(error);
 			by_mover[mover.id].speed_relative_error.push_back(error);
+			if (best->speed_sigma_mps && *best->speed_sigma_mps > 0)
+				speed_error_sigmas.push_back(std::abs(*best->speed_mps - true_speed) /
+							     *best->speed_sigma_mps);
 		}
 		const cv::Vec3d &v = mover.world_velocity_mps;
 		const double ground_speed = std::hypot(v[0], v[2]);
@@ -328,8 +331,9 @@ std::string group_score_table(const std::string &name, const GroupScore &s)
 	       "| "
 	       "mover views covered | inside a group box | untouched | centroid error m (median) | speed error "
 	       "(median) | speed within 10% | heading error deg (median) | heading within 15 deg | id switches | "
-	       "walking views | walking covered | walking labels precision | recall | F1 |\n";
-	out << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+	       "walking views | walking covered | walking labels precision | recall | F1 | speed within 1 sigma | "
+	       "within 2 sigma |\n";
+	out << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
 	out << "| " << name << " | " << s.frames << " | " << s.frames_separated << " | "
 	    << ratio(s.count_exact, s.frames_separated) << " | " << s.groups << " | "
 	    << ratio(s.groups_on_movers, s.groups) << " | " << s.groups_without_movers << " | "
@@ -339,7 +343,9 @@ std::string group_score_table(const std::string &name, const GroupScore &s)
 	    << std::setprecision(1) << median(s.heading_error_deg) << " | " << std::setprecision(3)
 	    << fraction_below(s.heading_error_deg, 15.0) << " | " << s.id_switches << " | " << s.walking_views << " | "
 	    << ratio(s.walking_covered, s.walking_views) << " | " << s.walking_labels.precision() << " | "
-	    << s.walking_labels.recall() << " | " << s.walking_labels.f1() << " |\n";
+	    << s.walking_labels.recall() << " | " << s.walking_labels.f1() << " | "
+	    << fraction_below(s.speed_error_sigmas, 1.0) << " | " << fraction_below(s.speed_error_sigmas, 2.0)
+	    << " |\n";
 	return out.str();
 }
 

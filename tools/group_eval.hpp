@@ -101,6 +101,9 @@ struct GroupScore {
 	LabelScore walking_labels;
 	std::vector<double> centroid_error_m;
 	std::vector<double> speed_relative_error;
+	/// The speed error over the group's published speed_sigma_mps, where it has one: the share within 1 and
+	/// 2 says whether the published uncertainty can be trusted (about 0.68 and 0.95 if it is right).
+	std::vector<double> speed_error_sigmas;
 	std::vector<double> heading_error_deg; ///< movers within max_heading_distance_m, moving
 	uint64_t id_switches = 0;
 	std::map<int, int> last_group_of_mover; ///< mover id -> group id last seen on it

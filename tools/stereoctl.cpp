@@ -261,42 +261,44 @@ int eval_groups(const std::string &results_path, const std::string &truth_dir, c
 		const auto ratio = [](uint64_t a, uint64_t b) {
 			return b > 0 ? static_cast<double>(a) / static_cast<double>(b) : 0.0;
 		};
-		std::cout << nlohmann::json{{"name", name},
-					    {"frames", score.frames},
-					    {"frames_separated", score.frames_separated},
-					    {"count_exact", ratio(score.count_exact, score.frames_separated)},
-					    {"groups", score.groups},
-					    {"groups_on_movers", ratio(score.groups_on_movers, score.groups)},
-					    {"groups_without_movers", score.groups_without_movers},
-					    {"movers_covered", ratio(score.movers_covered, score.mover_views)},
-					    {"movers_inside", ratio(score.movers_inside, score.mover_views)},
-					    {"movers_untouched", ratio(score.movers_untouched, score.mover_views)},
-					    {"centroid_error_m", tools::median(score.centroid_error_m)},
-					    {"speed_relative_error", tools::median(score.speed_relative_error)},
-					    {"speed_within_10_percent",
-					     tools::fraction_below(score.speed_relative_error, 0.1)},
-					    {"heading_error_deg", tools::median(score.heading_error_deg)},
-					    {"heading_within_15_deg",
-					     tools::fraction_below(score.heading_error_deg, 15)},
-					    {"id_switches", score.id_switches},
-					    {"walking_views", score.walking_views},
-					    {"walking_covered", ratio(score.walking_covered, score.walking_views)},
-					    {"walking_label_precision", score.walking_labels.precision()},
-					    {"walking_label_recall", score.walking_labels.recall()},
-					    {"walking_label_f1", score.walking_labels.f1()},
-					    {"count_too_many", ratio(score.count_over, score.frames_separated)},
-					    {"count_too_few", ratio(score.count_under, score.frames_separated)},
-					    {"frames_every_mover_seen", score.frames_seen},
-					    {"count_exact_every_mover_seen",
-					     ratio(score.count_exact_seen, score.frames_seen)},
-					    {"movers_split",
-					     ratio(score.separated_movers_split, score.separated_mover_views)},
-					    {"movers_missed",
-					     ratio(score.separated_movers_missed, score.separated_mover_views)},
-					    {"groups_off_movers",
-					     ratio(score.separated_groups_off, score.separated_groups)}}
-				     .dump()
-			  << "\n";
+		std::cout
+			<< nlohmann::json{{"name", name},
+					  {"frames", score.frames},
+					  {"frames_separated", score.frames_separated},
+					  {"count_exact", ratio(score.count_exact, score.frames_separated)},
+					  {"groups", score.groups},
+					  {"groups_on_movers", ratio(score.groups_on_movers, score.groups)},
+					  {"groups_without_movers", score.groups_without_movers},
+					  {"movers_covered", ratio(score.movers_covered, score.mover_views)},
+					  {"movers_inside", ratio(score.movers_inside, score.mover_views)},
+					  {"movers_untouched", ratio(score.movers_untouched, score.mover_views)},
+					  {"centroid_error_m", tools::median(score.centroid_error_m)},
+					  {"speed_relative_error", tools::median(score.speed_relative_error)},
+					  {"speed_within_10_percent",
+					   tools::fraction_below(score.speed_relative_error, 0.1)},
+					  {"speed_within_1_sigma", tools::fraction_below(score.speed_error_sigmas, 1)},
+					  {"speed_within_2_sigma", tools::fraction_below(score.speed_error_sigmas, 2)},
+					  {"heading_error_deg", tools::median(score.heading_error_deg)},
+					  {"heading_within_15_deg", tools::fraction_below(score.heading_error_deg, 15)},
+					  {"id_switches", score.id_switches},
+					  {"walking_views", score.walking_views},
+					  {"walking_covered", ratio(score.walking_covered, score.walking_views)},
+					  {"walking_label_precision", score.walking_labels.precision()},
+					  {"walking_label_recall", score.walking_labels.recall()},
+					  {"walking_label_f1", score.walking_labels.f1()},
+					  {"count_too_many", ratio(score.count_over, score.frames_separated)},
+					  {"count_too_few", ratio(score.count_under, score.frames_separated)},
+					  {"frames_every_mover_seen", score.frames_seen},
+					  {"count_exact_every_mover_seen",
+					   ratio(score.count_exact_seen, score.frames_seen)},
+					  {"movers_split",
+					   ratio(score.separated_movers_split, score.separated_mover_views)},
+					  {"movers_missed",
+					   ratio(score.separated_movers_missed, score.separated_mover_views)},
+					  {"groups_off_movers",
+					   ratio(score.separated_groups_off, score.separated_groups)}}
+				   .dump()
+			<< "\n";
 	} else {
 		std::cout << "\n" << tools::group_score_table(name, score);
 		if (count_detail) {
@@ -451,8 +453,12 @@ void draw_points(cv::Mat &image, const FrameResult &result, bool arrows)
 		if (g.missed_frames > 0)
 			label += " +" + std::to_string(g.missed_frames);
 		if (g.speed_mps) {
-			char speed[32];
-			std::snprintf(speed, sizeof speed, " %.1f m/s", *g.speed_mps);
+			char speed[48];
+			if (g.speed_sigma_mps)
+				std::snprintf(speed, sizeof speed, " %.1f +-%.1f m/s", *g.speed_mps,
+					      *g.speed_sigma_mps);
+			else
+				std::snprintf(speed, sizeof speed, " %.1f m/s", *g.speed_mps);
 			label += speed;
 		}
 		cv::putText(image, label, a + cv::Point2f(2, -4), cv::FONT_HERSHEY_SIMPLEX, 0.45, colour, 1,

@@ -646,7 +646,7 @@ const PositionHistory::Entry &PositionHistory::newest(size_t i) const
 	return entries[(next + kCapacity - 1 - i) % kCapacity];
 }
 
-std::optional<double> velocity_along(const PositionHistory &history, double window_s, const cv::Vec3d &ray)
+std::optional<Estimate> velocity_along(const PositionHistory &history, double window_s, const cv::Vec3d &ray)
 {
 	if (history.size == 0 || window_s <= 0)
 		return std::nullopt;
@@ -691,9 +691,67 @@ std::optional<double> velocity_along(const PositionHistory &history, double wind
 		return std::nullopt;
 	// A measure without spread is exact and wins outright (constructed data; both: their mean).
 	if (slope_variance <= 0 || mean_variance <= 0)
-		return slope_variance <= 0 && mean_variance <= 0 ? (slope + mean_v) / 2
-								 : (slope_variance <= 0 ? slope : mean_v);
-	return (slope / slope_variance + mean_v / mean_variance) / (1 / slope_variance + 1 / mean_variance);
+		return Estimate{slope_variance <= 0 && mean_variance <= 0 ? (slope + mean_v) / 2
+									  : (slope_variance <= 0 ? slope : mean_v),
+				0};
+	const double inverse = 1 / slope_variance + 1 / mean_variance;
+	// Both measures come from the same members' depths, so their errors go together: the weighted mean's
+	// spread is taken as the weighted mean of their spreads (fully correlated), not the smaller spread of two
+	// independent ones.
+	const double spread =
+		(std::sqrt(slope_variance) / slope_variance + std::sqrt(mean_variance) / mean_variance) / inverse;
+	return Estimate{(slope / slope_variance + mean_v / mean_variance) / inverse, spread * spread};
+}
+
+namespace {
+
+/// The largest lag-one correlation measured_spread credits (5.4 times fewer independent measurements).
+constexpr double kMaxPersistence = 0.7;
+
+} // namespace
+
+std::optional<MeasuredSpread> measured_spread(const PositionHistory &history, size_t count, const cv::Vec3d &ray)
+{
+	std::array<cv::Vec3d, PositionHistory::kCapacity> velocities;
+	size_t n = 0;
+	for (size_t i = 0; i < history.size && n < count; ++i)
+		if (const auto &v = history.newest(i).measured_velocity)
+			velocities[n++] = *v;
+	if (n < 4)
+		return std::nullopt;
+	cv::Vec3d mean(0, 0, 0);
+	for (size_t i = 0; i < n; ++i)
+		mean += velocities[i];
+	mean /= static_cast<double>(n);
+	MeasuredSpread spread;
+	double along_lag = 0, across_lag = 0; // sums of products of consecutive deviations
+	for (size_t i = 0; i < n; ++i) {
+		const cv::Vec3d d = velocities[i] - mean;
+		const double along = d.dot(ray);
+		spread.along += along * along;
+		spread.across += d.dot(d) - along * along;
+		if (i + 1 < n) {
+			const cv::Vec3d next = velocities[i + 1] - mean;
+			const double next_along = next.dot(ray);
+			along_lag += along * next_along;
+			across_lag += (d - along * ray).dot(next - next_along * ray);
+		}
+	}
+	// A group's error persists from frame to frame (its members change a few at a time), so an average over n
+	// measurements is worth fewer independent ones: with lag-one correlation r, (1 - r) / (1 + r) of them.
+	const auto persistence = [](double lag, double total) {
+		const double r = total > 0 ? std::clamp(lag / total, 0.0, kMaxPersistence) : 0;
+		return (1 + r) / (1 - r);
+	};
+	spread.along_persistence = persistence(along_lag, spread.along);
+	spread.across_persistence = persistence(across_lag, spread.across);
+	// Over few samples the sample variance is itself uncertain: the variance of Student's t with n - 1 degrees
+	// of freedom, (n - 1) / (n - 3) times it, so that a young group's spread is not read as sure.
+	const auto dof = static_cast<double>(n - 1);
+	const double widen = dof / (dof - 2);
+	spread.along *= widen / dof;
+	spread.across *= widen / (2.0 * dof);
+	return spread;
 }
 
 namespace {
@@ -704,6 +762,10 @@ cv::Vec3d along_sight_from(const cv::Vec3d &smoothed, double along, const cv::Ve
 {
 	return smoothed + (along - smoothed.dot(ray)) * ray;
 }
+
+/// A group's velocity spread is taken over its newest this-many measurements: about half a second at 30 fps,
+/// enough for a variance, and short enough that a walker's turn does not swell it.
+constexpr size_t kSpreadMeasurements = 16;
 
 } // namespace
 
@@ -923,6 +985,8 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 		// Published: the averaged velocities with their component along the line of sight from the track's
 		// fitted positions (GroupParams::velocity_window_s), where it has them.
 		std::optional<cv::Vec3d> world_velocity = g.world_velocity_mps, velocity = g.velocity_mps;
+		std::optional<std::array<double, 2>> sigma; // along the sight, across it
+		std::optional<double> speed_sigma;
 		if (cluster.position && context.world_from_curr && cv::norm(*cluster.position) > 0) {
 			g.positions.push(
 				{g.clock_s, *context.world_from_curr * *cluster.position, cluster.world_velocity});
@@ -930,13 +994,29 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 				context.world_from_curr->r * (*cluster.position / cv::norm(*cluster.position));
 			const auto along = velocity_along(g.positions, params.velocity_window_s, ray);
 			if (along && world_velocity) {
-				const cv::Vec3d fused = along_sight_from(*world_velocity, *along, ray);
+				const cv::Vec3d fused = along_sight_from(*world_velocity, along->value, ray);
 				// The camera-frame velocity is the mover's own plus the static scene's apparent one, so
 				// it changes by as much.
 				if (velocity)
 					velocity =
 						*velocity + context.world_from_curr->r.t() * (fused - *world_velocity);
 				world_velocity = fused;
+			}
+			// The averages' spread: the running mean over the first 1 / smoothing measurements is their
+			// mean, the exponential average after it weighs as (2 - w) / w independent ones.
+			const double averaged = std::min(static_cast<double>(g.age_frames),
+							 (2 - params.smoothing) / std::max(params.smoothing, 1e-6));
+			if (const auto spread = world_velocity ? measured_spread(g.positions, kSpreadMeasurements, ray)
+							       : std::nullopt) {
+				const double along_variance = (along ? along->variance : spread->along / averaged) *
+							      spread->along_persistence;
+				const double across_variance = spread->across / averaged * spread->across_persistence;
+				sigma = {std::sqrt(along_variance), std::sqrt(across_variance)};
+				// The speed's, to first order: its direction's share of each.
+				const double speed = cv::norm(*world_velocity);
+				const double share = speed > 0 ? world_velocity->dot(ray) / speed : 1;
+				speed_sigma = std::sqrt(share * share * along_variance +
+							(1 - share * share) * across_variance);
 			}
 		}
 		if (g.age_frames < params.min_age_frames) {
@@ -960,6 +1040,8 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 			published.world_velocity_mps = array_of(w);
 			published.speed_mps = cv::norm(w);
 			published.heading_rad = std::atan2(w[0], w[2]);
+			published.velocity_sigma_mps = sigma;
+			published.speed_sigma_mps = speed_sigma;
 		}
 		g.published = published;
 		out.memory.groups.push_back(g);

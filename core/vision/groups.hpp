@@ -200,12 +200,33 @@ struct PositionHistory {
 	[[nodiscard]] const Entry &newest(size_t i) const;
 };
 
+/// A velocity component and the variance of its estimate, (m/s)^2.
+struct Estimate {
+	double value = 0;
+	double variance = 0;
+};
+
 /// The velocity along `ray` (a unit vector, the line of sight) over the entries of the last `window_s` before
 /// the newest, from two measures weighted by the inverse of their variances: the slope of the least-squares
 /// line through the positions (its variance from the line's residuals), and the mean of the measured
-/// velocities (its variance from their spread). nullopt when either has fewer than 4 entries, the positions
-/// span less than half the window, or a variance is not positive.
-std::optional<double> velocity_along(const PositionHistory &history, double window_s, const cv::Vec3d &ray);
+/// velocities (its variance from their spread); with the weighted mean's variance, the two taken as fully
+/// correlated (they measure the same depths). nullopt when either
+/// has fewer than 4 entries, the positions span less than half the window, or a variance is not positive.
+std::optional<Estimate> velocity_along(const PositionHistory &history, double window_s, const cv::Vec3d &ray);
+
+/// The variances of the newest `count` (at most) measured velocities of a track: of their component along
+/// `ray` (a unit vector), and per axis across it (the mean of the two axes normal to `ray`); the sample
+/// variances widened to Student's t over that many (n - 1 degrees of freedom: (n - 1) / (n - 3) times), and
+/// their persistence. nullopt with fewer than 4 measurements.
+struct MeasuredSpread {
+	double along = 0;
+	double across = 0;
+	/// How many times the variance of an average over them exceeds that of independent measurements, from
+	/// their lag-one correlation r along and across: (1 + r) / (1 - r), r taken in [0, 0.7].
+	double along_persistence = 1;
+	double across_persistence = 1;
+};
+std::optional<MeasuredSpread> measured_spread(const PositionHistory &history, size_t count, const cv::Vec3d &ray);
 
 /// A group followed across frames.
 struct TrackedGroup {

@@ -221,6 +221,7 @@ TEST(GroupEvaluation, HandComputedFrames)
 	frame.seq = 1;
 	frame.groups = {group_at(7, {98, 48, 44, 104}, 1.65, (90 + 10) * CV_PI / 180, {-1, 0, 5.3}),
 			group_at(8, {400, 10, 30, 30}, 1.0, 0.0, {3, 0, 8})};
+	frame.groups[0].speed_sigma_mps = 0.1; // 0.15 m/s off: 1.5 sigma
 	score.add(frame, mask, movers);
 	// Frame 2: both movers covered, mover 1 under another id (a switch), speeds exact.
 	frame.seq = 2;
@@ -240,6 +241,8 @@ TEST(GroupEvaluation, HandComputedFrames)
 	EXPECT_EQ(score.id_switches, 1U);
 	ASSERT_EQ(score.speed_relative_error.size(), 3U);
 	EXPECT_NEAR(score.speed_relative_error[0], 0.1, 1e-6);
+	ASSERT_EQ(score.speed_error_sigmas.size(), 1U); // the others published no sigma
+	EXPECT_NEAR(score.speed_error_sigmas[0], 1.5, 1e-6);
 	ASSERT_EQ(score.heading_error_deg.size(), 3U);
 	EXPECT_NEAR(score.heading_error_deg[0], 10.0, 1e-4);
 	EXPECT_NEAR(score.centroid_error_m[0], 0.3, 1e-6);

@@ -333,19 +333,20 @@ TEST(Groups, VelocityAlongASightLineWeighsTheFittedSlopeAndTheMeasuredMeanByThei
 	// Steady positions (2 cm) and frame-to-frame velocities that swing by 2 m/s: the slope wins.
 	const auto steady = velocity_along(history(0.02, -1.5, 2.0), 0.5, ray);
 	ASSERT_TRUE(steady.has_value());
-	EXPECT_NEAR(*steady, -1.5, 0.05);
+	EXPECT_NEAR(steady->value, -1.5, 0.05);
 	// Positions that jump by 30 cm and measured velocities of -1.2 give or take 1 cm/s: the mean wins.
 	const auto jumpy = velocity_along(history(0.3, -1.2, 0.01), 0.5, ray);
 	ASSERT_TRUE(jumpy.has_value());
-	EXPECT_NEAR(*jumpy, -1.2, 0.01);
+	EXPECT_NEAR(jumpy->value, -1.2, 0.01);
 	// Equal spreads land between the two (both unbiased here, so on the truth).
 	const auto both = velocity_along(history(0.05, -1.5, 0.5), 0.5, ray);
 	ASSERT_TRUE(both.has_value());
-	EXPECT_NEAR(*both, -1.5, 0.1);
+	EXPECT_NEAR(both->value, -1.5, 0.1);
 	// Across the sight line both say x stood still, without spread: exact.
 	const auto across = velocity_along(history(0.02, -1.5, 2.0), 0.5, cv::Vec3d(1, 0, 0));
 	ASSERT_TRUE(across.has_value());
-	EXPECT_NEAR(*across, 0, 1e-9);
+	EXPECT_NEAR(across->value, 0, 1e-9);
+	EXPECT_EQ(across->variance, 0);
 	// Too short a span (0.2 s of a 0.5 s window), or no window: nothing.
 	PositionHistory short_one;
 	for (int k = 0; k < 3; ++k)
@@ -361,12 +362,37 @@ TEST(Groups, VelocityAlongASightLineWeighsTheFittedSlopeAndTheMeasuredMeanByThei
 	EXPECT_EQ(full.newest(PositionHistory::kCapacity - 1).t_s, 5.0);
 }
 
+TEST(Groups, MeasuredSpreadCountsPersistentErrorsAsFewerMeasurements)
+{
+	const cv::Vec3d ray(0, 0, 1);
+	// Along the sight: errors alternating by 1 m/s (lag-one correlation negative, credited as none); across
+	// (x): an error that drifts, a slow sine over 16 frames (strongly persistent, the credit's cap).
+	PositionHistory history;
+	for (int k = 0; k < 20; ++k)
+		history.push({0.1 * k, cv::Vec3d(0, 0, 0),
+			      cv::Vec3d(0.3 * std::sin(2 * CV_PI * k / 16.0), 0, -1.5 + (k % 2 == 0 ? 1 : -1))});
+	const auto spread = measured_spread(history, 16, ray);
+	ASSERT_TRUE(spread.has_value());
+	EXPECT_DOUBLE_EQ(spread->along_persistence, 1);
+	EXPECT_NEAR(spread->across_persistence, (1 + 0.7) / (1 - 0.7), 1e-9);
+	// Sample variances (16 alternating values of +-1: 16/15), Student-widened by 15/13; across, x's over
+	// the two axes normal to the sight.
+	EXPECT_NEAR(spread->along, 16.0 / 15 * 15.0 / 13, 1e-9);
+	EXPECT_GT(spread->across, 0.3 * 0.3 / 2 / 2 * 0.9);
+	// The newest measurements only, and at least four of them.
+	EXPECT_FALSE(measured_spread(history, 3, ray).has_value());
+	PositionHistory none;
+	for (int k = 0; k < 8; ++k)
+		none.push({0.1 * k, cv::Vec3d(0, 0, 0), std::nullopt});
+	EXPECT_FALSE(measured_spread(none, 16, ray).has_value());
+}
+
 TEST(Groups, AMoverAlongTheSightLineTakesItsSpeedFromItsPositions)
 {
 	// Group A of the crossing scene, but straight ahead and closing along z from 9 m at 1.5 m/s: its members'
 	// depth changes from one frame to the next say 1.5 m/s give or take 2 m/s (the disparity's noise at
 	// that range), alternating, while their median position follows the truth within 2 cm.
-	const auto published_speeds = [](double window_s) {
+	const auto published_groups = [](double window_s) {
 		std::mt19937 rng(5);
 		GroupParams params;
 		params.velocity_window_s = window_s;
@@ -375,7 +401,7 @@ TEST(Groups, AMoverAlongTheSightLineTakesItsSpeedFromItsPositions)
 		GroupMotionContext context = tenth_of_a_second();
 		context.curr_from_prev = geometry::Pose{};
 		context.world_from_curr = geometry::Pose{};
-		std::vector<double> speeds;
+		std::vector<TargetGroup> groups;
 		for (int frame = 0; frame < 30; ++frame) {
 			auto points = crossing_frame(frame, rng);
 			points.resize(140);
@@ -390,20 +416,98 @@ TEST(Groups, AMoverAlongTheSightLineTakesItsSpeedFromItsPositions)
 				find_groups(points, frame == 0 ? nullptr : &memory, context, params, workspace);
 			memory = out.memory;
 			if (frame >= 10 && out.groups.size() == 1 && out.groups[0].speed_mps)
-				speeds.push_back(*out.groups[0].speed_mps);
+				groups.push_back(out.groups[0]);
 		}
-		return speeds;
+		return groups;
 	};
-	const auto fitted = published_speeds(0.5);
+	const auto speeds = [](const std::vector<TargetGroup> &groups) {
+		std::vector<double> out;
+		for (const auto &g : groups)
+			out.push_back(*g.speed_mps);
+		return out;
+	};
+	const auto fitted = speeds(published_groups(0.5));
 	ASSERT_EQ(fitted.size(), 20U);
 	for (const double speed : fitted)
 		EXPECT_NEAR(speed, 1.5, 0.1);
 	// The averages alone swing by 2.0 * 0.2 / 1.8 = 0.22 m/s about the truth.
-	const auto averaged = published_speeds(0);
+	const auto averaged = speeds(published_groups(0));
 	ASSERT_EQ(averaged.size(), 20U);
 	EXPECT_GT(*std::max_element(averaged.begin(), averaged.end()) -
 			  *std::min_element(averaged.begin(), averaged.end()),
 		  0.3);
+}
+
+TEST(Groups, AGroupsVelocityComesWithItsUncertainty)
+{
+	// The mover of the test above, closing along the sight line at 1.5 m/s, its frame-to-frame measurements
+	// swinging by 2 m/s along the sight and 0.2 m/s across it (x), its median position within 2 cm of the
+	// truth. Published with the spreads of its estimates along and across the sight line, and of its speed.
+	const auto published_groups = [](double window_s) {
+		std::mt19937 rng(5);
+		GroupParams params;
+		params.velocity_window_s = window_s;
+		AffinityPropagation workspace;
+		GroupMemory memory;
+		GroupMotionContext context = tenth_of_a_second();
+		context.curr_from_prev = geometry::Pose{};
+		context.world_from_curr = geometry::Pose{};
+		std::vector<TargetGroup> groups;
+		for (int frame = 0; frame < 30; ++frame) {
+			auto points = crossing_frame(frame, rng);
+			points.resize(140);
+			const double sign = frame % 2 == 0 ? 1 : -1;
+			const double z = 9 - 1.5 * 0.1 * frame + 0.02 * sign, measured = -1.5 + 2.0 * sign;
+			for (size_t i = 120; i < points.size(); ++i) {
+				const cv::Vec3f now(0.01F * (static_cast<float>(i) - 130), 0, static_cast<float>(z));
+				points[i].xyz = now;
+				points[i].prev_xyz = now - cv::Vec3f(static_cast<float>(0.2 * sign * context.dt_s), 0,
+								     static_cast<float>(measured * context.dt_s));
+			}
+			GroupOutput out =
+				find_groups(points, frame == 0 ? nullptr : &memory, context, params, workspace);
+			memory = out.memory;
+			if (out.groups.size() == 1 && out.groups[0].speed_mps)
+				groups.push_back(out.groups[0]);
+		}
+		return groups;
+	};
+	// From the averages alone: the along-sight sample spread (2.0 m/s, a little more over few samples) over
+	// the frames averaged, up to (2 - 0.2) / 0.2 = 9 of them; across, a tenth of it.
+	const auto averaged = published_groups(0);
+	ASSERT_GE(averaged.size(), 25U);
+	for (const auto &g : averaged) {
+		// Three measurements tell no spread.
+		if (g.age_frames < 4) {
+			EXPECT_FALSE(g.velocity_sigma_mps.has_value());
+			continue;
+		}
+		ASSERT_TRUE(g.velocity_sigma_mps.has_value()) << "age " << g.age_frames;
+		ASSERT_TRUE(g.speed_sigma_mps.has_value());
+		// The sample spread of n measurements swinging by 2 m/s, widened by Student's t for n - 1 degrees of
+		// freedom, over the frames averaged; the swings alternate, so no persistence widens it further.
+		const double n = std::min(g.age_frames, 16);
+		const double spread = 2.0 * std::sqrt(n / (n - 1)) * std::sqrt((n - 1) / (n - 3));
+		const double frames = std::min(g.age_frames, 9);
+		EXPECT_NEAR((*g.velocity_sigma_mps)[0], spread / std::sqrt(frames), 0.05) << "age " << g.age_frames;
+		EXPECT_NEAR((*g.velocity_sigma_mps)[1] / (*g.velocity_sigma_mps)[0], 0.1 / std::sqrt(2.0), 0.03);
+		// Moving along the sight, the speed's spread is that along it.
+		EXPECT_NEAR(*g.speed_sigma_mps, (*g.velocity_sigma_mps)[0], 0.05);
+	}
+	// Younger is less sure: 2.0 m/s at 4 frames, 0.74 from 16 on.
+	const auto first = std::find_if(averaged.begin(), averaged.end(),
+					[](const TargetGroup &g) { return g.velocity_sigma_mps.has_value(); });
+	ASSERT_NE(first, averaged.end());
+	EXPECT_GT((*first->velocity_sigma_mps)[0], 2.5 * (*averaged.back().velocity_sigma_mps)[0]);
+	// Once the positions fill half the window, the fitted line's spread: a few cm/s.
+	const auto fitted = published_groups(0.5);
+	ASSERT_GE(fitted.size(), 25U);
+	for (const auto &g : fitted)
+		if (g.age_frames >= 10) {
+			EXPECT_LT((*g.velocity_sigma_mps)[0], 0.1) << "age " << g.age_frames;
+			EXPECT_LT(std::abs(*g.speed_mps - 1.5), 3 * *g.speed_sigma_mps + 0.02)
+				<< "age " << g.age_frames;
+		}
 }
 
 TEST(Groups, AFarMoverHiddenByANearOneComesOutUnderItsId)

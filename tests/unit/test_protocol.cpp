@@ -116,6 +116,8 @@ TEST(Protocol, GroupsRoundTripWithDepthFieldsOnlyWhereMeasured)
 	metric.world_velocity_mps = std::array<double, 3>{-1.5, 0, 0};
 	metric.speed_mps = 1.5;
 	metric.heading_rad = -1.571;
+	metric.velocity_sigma_mps = std::array<double, 2>{0.75, 0.125};
+	metric.speed_sigma_mps = 0.25;
 	r.groups = {image_only, metric};
 	const auto json = nlohmann::json::parse(protocol::frame_message(r));
 	EXPECT_FALSE(json.at("groups")[0].contains("position_m")) << "never invented";
@@ -136,6 +138,12 @@ TEST(Protocol, GroupsRoundTripWithDepthFieldsOnlyWhereMeasured)
 	EXPECT_DOUBLE_EQ((*back.groups[1].extent_m)[1], 1.75);
 	EXPECT_DOUBLE_EQ(*back.groups[1].speed_mps, 1.5);
 	EXPECT_DOUBLE_EQ(*back.groups[1].heading_rad, -1.571);
+	EXPECT_FALSE(json.at("groups")[0].contains("speed_sigma_mps"));
+	EXPECT_FALSE(back.groups[0].velocity_sigma_mps.has_value());
+	ASSERT_TRUE(back.groups[1].velocity_sigma_mps && back.groups[1].speed_sigma_mps);
+	EXPECT_DOUBLE_EQ((*back.groups[1].velocity_sigma_mps)[0], 0.75);
+	EXPECT_DOUBLE_EQ((*back.groups[1].velocity_sigma_mps)[1], 0.125);
+	EXPECT_DOUBLE_EQ(*back.groups[1].speed_sigma_mps, 0.25);
 }
 
 TEST(Protocol, PersonPriorFieldsRoundTripAndAreAbsentWhenOff)
