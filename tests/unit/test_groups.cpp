@@ -387,51 +387,62 @@ TEST(Groups, MeasuredSpreadCountsPersistentErrorsAsFewerMeasurements)
 	EXPECT_FALSE(measured_spread(none, 16, ray).has_value());
 }
 
+namespace {
+
+/// Group A of the crossing scene, but straight ahead and closing along z from 9 m at 1.5 m/s: its members'
+/// depth changes from one frame to the next say 1.5 m/s give or take 2 m/s (the disparity's noise at that
+/// range), alternating, and their x changes swing by `across_swing_mps` the same way, while their median
+/// position follows the truth within 2 cm. Per frame: the single group published with a speed, if any.
+std::vector<std::optional<TargetGroup>> closing_mover(double window_s, double across_swing_mps)
+{
+	std::mt19937 rng(5);
+	GroupParams params;
+	params.velocity_window_s = window_s;
+	AffinityPropagation workspace;
+	GroupMemory memory;
+	GroupMotionContext context = tenth_of_a_second();
+	context.curr_from_prev = geometry::Pose{};
+	context.world_from_curr = geometry::Pose{};
+	std::vector<std::optional<TargetGroup>> published;
+	for (int frame = 0; frame < 30; ++frame) {
+		auto points = crossing_frame(frame, rng);
+		points.resize(140);
+		const double sign = frame % 2 == 0 ? 1 : -1;
+		const double z = 9 - 1.5 * 0.1 * frame + 0.02 * sign, measured = -1.5 + 2.0 * sign;
+		for (size_t i = 120; i < points.size(); ++i) {
+			const cv::Vec3f now(0.01F * (static_cast<float>(i) - 130), 0, static_cast<float>(z));
+			points[i].xyz = now;
+			points[i].prev_xyz = now - cv::Vec3f(static_cast<float>(across_swing_mps * sign * context.dt_s),
+							     0, static_cast<float>(measured * context.dt_s));
+		}
+		GroupOutput out = find_groups(points, frame == 0 ? nullptr : &memory, context, params, workspace);
+		memory = out.memory;
+		published.push_back(out.groups.size() == 1 && out.groups[0].speed_mps
+					    ? std::optional<TargetGroup>(out.groups[0])
+					    : std::nullopt);
+	}
+	return published;
+}
+
+} // namespace
+
 TEST(Groups, AMoverAlongTheSightLineTakesItsSpeedFromItsPositions)
 {
-	// Group A of the crossing scene, but straight ahead and closing along z from 9 m at 1.5 m/s: its members'
-	// depth changes from one frame to the next say 1.5 m/s give or take 2 m/s (the disparity's noise at
-	// that range), alternating, while their median position follows the truth within 2 cm.
-	const auto published_groups = [](double window_s) {
-		std::mt19937 rng(5);
-		GroupParams params;
-		params.velocity_window_s = window_s;
-		AffinityPropagation workspace;
-		GroupMemory memory;
-		GroupMotionContext context = tenth_of_a_second();
-		context.curr_from_prev = geometry::Pose{};
-		context.world_from_curr = geometry::Pose{};
-		std::vector<TargetGroup> groups;
-		for (int frame = 0; frame < 30; ++frame) {
-			auto points = crossing_frame(frame, rng);
-			points.resize(140);
-			const double sign = frame % 2 == 0 ? 1 : -1;
-			const double z = 9 - 1.5 * 0.1 * frame + 0.02 * sign, measured = -1.5 + 2.0 * sign;
-			for (size_t i = 120; i < points.size(); ++i) {
-				const cv::Vec3f now(0.01F * (static_cast<float>(i) - 130), 0, static_cast<float>(z));
-				points[i].xyz = now;
-				points[i].prev_xyz = now - cv::Vec3f(0, 0, static_cast<float>(measured * context.dt_s));
-			}
-			GroupOutput out =
-				find_groups(points, frame == 0 ? nullptr : &memory, context, params, workspace);
-			memory = out.memory;
-			if (frame >= 10 && out.groups.size() == 1 && out.groups[0].speed_mps)
-				groups.push_back(out.groups[0]);
-		}
-		return groups;
-	};
-	const auto speeds = [](const std::vector<TargetGroup> &groups) {
+	// Its speed from frame 10 on.
+	const auto speeds = [](double window_s) {
 		std::vector<double> out;
-		for (const auto &g : groups)
-			out.push_back(*g.speed_mps);
+		const auto published = closing_mover(window_s, 0);
+		for (size_t frame = 10; frame < published.size(); ++frame)
+			if (published[frame])
+				out.push_back(*published[frame]->speed_mps);
 		return out;
 	};
-	const auto fitted = speeds(published_groups(0.5));
+	const auto fitted = speeds(0.5);
 	ASSERT_EQ(fitted.size(), 20U);
 	for (const double speed : fitted)
 		EXPECT_NEAR(speed, 1.5, 0.1);
 	// The averages alone swing by 2.0 * 0.2 / 1.8 = 0.22 m/s about the truth.
-	const auto averaged = speeds(published_groups(0));
+	const auto averaged = speeds(0);
 	ASSERT_EQ(averaged.size(), 20U);
 	EXPECT_GT(*std::max_element(averaged.begin(), averaged.end()) -
 			  *std::min_element(averaged.begin(), averaged.end()),
@@ -440,36 +451,13 @@ TEST(Groups, AMoverAlongTheSightLineTakesItsSpeedFromItsPositions)
 
 TEST(Groups, AGroupsVelocityComesWithItsUncertainty)
 {
-	// The mover of the test above, closing along the sight line at 1.5 m/s, its frame-to-frame measurements
-	// swinging by 2 m/s along the sight and 0.2 m/s across it (x), its median position within 2 cm of the
-	// truth. Published with the spreads of its estimates along and across the sight line, and of its speed.
+	// The closing mover with its x measurements swinging by 0.2 m/s: published with the spreads of its
+	// estimates along and across the sight line, and of its speed.
 	const auto published_groups = [](double window_s) {
-		std::mt19937 rng(5);
-		GroupParams params;
-		params.velocity_window_s = window_s;
-		AffinityPropagation workspace;
-		GroupMemory memory;
-		GroupMotionContext context = tenth_of_a_second();
-		context.curr_from_prev = geometry::Pose{};
-		context.world_from_curr = geometry::Pose{};
 		std::vector<TargetGroup> groups;
-		for (int frame = 0; frame < 30; ++frame) {
-			auto points = crossing_frame(frame, rng);
-			points.resize(140);
-			const double sign = frame % 2 == 0 ? 1 : -1;
-			const double z = 9 - 1.5 * 0.1 * frame + 0.02 * sign, measured = -1.5 + 2.0 * sign;
-			for (size_t i = 120; i < points.size(); ++i) {
-				const cv::Vec3f now(0.01F * (static_cast<float>(i) - 130), 0, static_cast<float>(z));
-				points[i].xyz = now;
-				points[i].prev_xyz = now - cv::Vec3f(static_cast<float>(0.2 * sign * context.dt_s), 0,
-								     static_cast<float>(measured * context.dt_s));
-			}
-			GroupOutput out =
-				find_groups(points, frame == 0 ? nullptr : &memory, context, params, workspace);
-			memory = out.memory;
-			if (out.groups.size() == 1 && out.groups[0].speed_mps)
-				groups.push_back(out.groups[0]);
-		}
+		for (const auto &g : closing_mover(window_s, 0.2))
+			if (g)
+				groups.push_back(*g);
 		return groups;
 	};
 	// From the averages alone: the along-sight sample spread (2.0 m/s, a little more over few samples) over
