@@ -910,6 +910,11 @@ const std::vector<Option> &options()
 			"track's world positions over this many seconds (the depth's frame-to-frame noise averages "
 			"out); 0: the averages alone",
 			[](DaemonConfig &c) -> double & { return c.motion.groups.velocity_window_s; }, 0, 60));
+		o.push_back(boolean(
+			"groups", "anchored_velocity",
+			"tracks: until that window is half full, also take the velocity along the line of sight "
+			"from the members' anchors (where their tracks were a third of a second or more ago)",
+			[](DaemonConfig &c) -> bool & { return c.motion.groups.anchored_velocity; }));
 		o.push_back(boolean("groups", "label_points", "label points inside a group moving with it dynamic",
 				    [](DaemonConfig &c) -> bool & { return c.motion.groups.label_points; }));
 		o.push_back(number(

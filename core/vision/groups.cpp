@@ -22,6 +22,11 @@ std::array<double, 3> array_of(const cv::Vec3d &v)
 	return {v[0], v[1], v[2]};
 }
 
+/// A velocity per axis and the variance of each.
+struct Estimate3 {
+	cv::Vec3d value, variance;
+};
+
 /// One cluster's measurements before tracking.
 struct Cluster {
 	std::vector<uint32_t> members; ///< point indices
@@ -30,7 +35,13 @@ struct Cluster {
 	cv::Point2f flow;     ///< median observed flow, pixels per frame
 	cv::Point2f residual; ///< median residual
 	std::optional<cv::Vec3d> position, extent, velocity, world_velocity;
+	/// The members' median world velocity since their anchors (MotionPoint::anchor_world), where enough have
+	/// one, and that median's variance per axis (pi / 2 times the members' sample variance over their number).
+	std::optional<Estimate3> anchored_velocity;
 };
+
+/// A member's anchor must lie at least this far back to measure its velocity by (a third of a second).
+constexpr double kMinAnchorSpanS = 0.33;
 
 Cluster measure(std::vector<uint32_t> members, const std::vector<MotionPoint> &points,
 		const GroupMotionContext &context, float margin)
@@ -39,7 +50,7 @@ Cluster measure(std::vector<uint32_t> members, const std::vector<MotionPoint> &p
 	c.members = std::move(members);
 	std::vector<float> u, v, fu, fv, ru, rv;
 	float u0 = 1e9f, v0 = 1e9f, u1 = -1e9f, v1 = -1e9f;
-	std::array<std::vector<float>, 3> xyz, rel, world;
+	std::array<std::vector<float>, 3> xyz, rel, world, anchored;
 	for (const uint32_t i : c.members) {
 		const MotionPoint &p = points[i];
 		u0 = std::min(u0, p.px.x);
@@ -69,6 +80,13 @@ Cluster measure(std::vector<uint32_t> members, const std::vector<MotionPoint> &p
 		const MotionPoint &p = points[i];
 		if (!p.xyz || (clean_only && p.depth_on_edge))
 			continue;
+		if (p.anchor_world && p.anchor_span_s >= kMinAnchorSpanS && context.world_from_curr) {
+			const cv::Vec3d since =
+				(*context.world_from_curr * cv::Vec3d(*p.xyz) - cv::Vec3d(*p.anchor_world)) /
+				p.anchor_span_s;
+			for (int a = 0; a < 3; ++a)
+				anchored[static_cast<size_t>(a)].push_back(static_cast<float>(since[a]));
+		}
 		if (p.prev_xyz && context.dt_s > 0) {
 			const cv::Vec3d now(*p.xyz), before(*p.prev_xyz);
 			const cv::Vec3d relative = (now - before) / context.dt_s;
@@ -101,6 +119,23 @@ Cluster measure(std::vector<uint32_t> members, const std::vector<MotionPoint> &p
 		c.velocity = cv::Vec3d(median_of(rel[0]), median_of(rel[1]), median_of(rel[2]));
 	if (world[0].size() >= kMinWithDepth)
 		c.world_velocity = cv::Vec3d(median_of(world[0]), median_of(world[1]), median_of(world[2]));
+	if (anchored[0].size() >= kMinWithDepth) {
+		Estimate3 e;
+		for (size_t a = 0; a < 3; ++a) {
+			const auto &values = anchored[a];
+			double mean = 0, squares = 0;
+			for (const float x : values)
+				mean += x;
+			mean /= static_cast<double>(values.size());
+			for (const float x : values)
+				squares += (x - mean) * (x - mean);
+			e.value[static_cast<int>(a)] = median_of(values);
+			e.variance[static_cast<int>(a)] = std::numbers::pi / 2 * squares /
+							  static_cast<double>(values.size() - 1) /
+							  static_cast<double>(values.size());
+		}
+		c.anchored_velocity = e;
+	}
 	return c;
 }
 
@@ -763,6 +798,26 @@ cv::Vec3d along_sight_from(const cv::Vec3d &smoothed, double along, const cv::Ve
 	return smoothed + (along - smoothed.dot(ray)) * ray;
 }
 
+/// A young group's velocity along the sight line from its members' anchors (`anchored`, per axis) and its
+/// averaged frame-to-frame measurements (`averaged`, with their variance where known), weighted by the inverse
+/// of their variances; the two measure the same depths in part, so the weighted mean's spread is taken as the
+/// weighted mean of theirs. Without the averages' variance, the anchors' alone.
+std::optional<Estimate> along_from_anchors(const Estimate3 &anchored, const cv::Vec3d &ray, double averaged,
+					   std::optional<double> averaged_variance)
+{
+	const double value = anchored.value.dot(ray);
+	double variance = 0;
+	for (int a = 0; a < 3; ++a)
+		variance += ray[a] * ray[a] * anchored.variance[a];
+	if (!std::isfinite(variance) || variance <= 0)
+		return std::nullopt;
+	if (!averaged_variance || !std::isfinite(*averaged_variance) || *averaged_variance <= 0)
+		return Estimate{value, variance};
+	const double inverse = 1 / variance + 1 / *averaged_variance;
+	const double spread = (1 / std::sqrt(variance) + 1 / std::sqrt(*averaged_variance)) / inverse;
+	return Estimate{(value / variance + averaged / *averaged_variance) / inverse, spread * spread};
+}
+
 /// A group's velocity spread is taken over its newest this-many measurements: about half a second at 30 fps,
 /// enough for a variance, and short enough that a walker's turn does not swell it.
 constexpr size_t kSpreadMeasurements = 16;
@@ -992,7 +1047,20 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 				{g.clock_s, *context.world_from_curr * *cluster.position, cluster.world_velocity});
 			const cv::Vec3d ray =
 				context.world_from_curr->r * (*cluster.position / cv::norm(*cluster.position));
-			const auto along = velocity_along(g.positions, params.velocity_window_s, ray);
+			const auto spread =
+				world_velocity ? measured_spread(g.positions, kSpreadMeasurements, ray) : std::nullopt;
+			// The averages' spread: the running mean over the first 1 / smoothing measurements is their
+			// mean, the exponential average after it weighs as (2 - w) / w independent ones.
+			const double averaged = std::min(static_cast<double>(g.age_frames),
+							 (2 - params.smoothing) / std::max(params.smoothing, 1e-6));
+			std::optional<Estimate> along = velocity_along(g.positions, params.velocity_window_s, ray);
+			if (along)
+				along->variance *= spread ? spread->along_persistence : 1;
+			else if (world_velocity && params.anchored_velocity && cluster.anchored_velocity)
+				along = along_from_anchors(*cluster.anchored_velocity, ray, world_velocity->dot(ray),
+							   spread ? std::optional<double>(spread->along / averaged *
+											  spread->along_persistence)
+								  : std::nullopt);
 			if (along && world_velocity) {
 				const cv::Vec3d fused = along_sight_from(*world_velocity, along->value, ray);
 				// The camera-frame velocity is the mover's own plus the static scene's apparent one, so
@@ -1002,14 +1070,9 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 						*velocity + context.world_from_curr->r.t() * (fused - *world_velocity);
 				world_velocity = fused;
 			}
-			// The averages' spread: the running mean over the first 1 / smoothing measurements is their
-			// mean, the exponential average after it weighs as (2 - w) / w independent ones.
-			const double averaged = std::min(static_cast<double>(g.age_frames),
-							 (2 - params.smoothing) / std::max(params.smoothing, 1e-6));
-			if (const auto spread = world_velocity ? measured_spread(g.positions, kSpreadMeasurements, ray)
-							       : std::nullopt) {
-				const double along_variance = (along ? along->variance : spread->along / averaged) *
-							      spread->along_persistence;
+			if (spread) {
+				const double along_variance =
+					along ? along->variance : spread->along / averaged * spread->along_persistence;
 				const double across_variance = spread->across / averaged * spread->across_persistence;
 				sigma = {std::sqrt(along_variance), std::sqrt(across_variance)};
 				// The speed's, to first order: its direction's share of each.

@@ -87,6 +87,10 @@ struct GroupParams {
 	/// the line of sight the points' own image motion stays far the better measure. 0: the averages alone
 	/// (docs/groups.md, stop 49).
 	double velocity_window_s = 0.5;
+	/// Until then, a young group's speed along the sight also comes from its members' anchors (where their
+	/// tracks were in the world a third of a second or more ago, the anchored depth test's), weighed against
+	/// its averaged frame-to-frame measurements by their spreads (docs/groups.md, stop 53).
+	bool anchored_velocity = true;
 	/// Labels: a point inside a published group's box whose residual agrees with the group's (within the
 	/// larger of this and half the group's residual) becomes dynamic. 2 px: a keypoint's position is
 	/// quantised to its pyramid level, so a slow walker's own residual is off the group's by a pixel or two
@@ -175,6 +179,11 @@ struct MotionPoint {
 	/// Either depth came from a stereo window across a depth edge (StereoParams::edge_split_px): good enough to
 	/// cluster by, not to measure the group's velocity with.
 	bool depth_on_edge = false;
+	/// Where the point's track was in the world a while ago (its anchor: the mean of its first depths), and how
+	/// long ago that mean lies, seconds: a velocity over that span carries a frame's depth noise over many
+	/// frames instead of one.
+	std::optional<cv::Vec3f> anchor_world;
+	double anchor_span_s = 0;
 	bool dynamic = false; ///< the classifier's label (GroupMembers::Labels)
 	/// Where only part of the motion is measured (a grid cell on an edge: the aperture problem), the unit
 	/// direction across the edge; (0, 0): the whole residual is measured. find_groups drops a cluster most

@@ -665,6 +665,10 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, Fram
 		// Each point's motion against what the static scene would do: the pose's prediction (stereo), else
 		// the homography, else standing still.
 		std::vector<MotionPoint> motion(n);
+		const double frame_interval_s =
+			prev_tracks != nullptr && frame.device_ns > prev_tracks->t_ns
+				? static_cast<double>(frame.device_ns - prev_tracks->t_ns) * 1e-9
+				: 0;
 		for (size_t i = 0; i < n; ++i) {
 			MotionPoint &m = motion[i];
 			m.px = pairs[i].cur;
@@ -694,6 +698,17 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, Fram
 			if (p < prev->xyz.size() && std::isfinite(prev->xyz[p][2]))
 				m.prev_xyz = prev->xyz[p];
 			m.depth_on_edge = on_depth_edge(cur, c) || on_depth_edge(*prev, p);
+			if (c < tracks.by_keypoint.size()) {
+				const TrackState &track = tracks.by_keypoint[c];
+				// The anchor is the mean of its first anchor_samples depths, one a frame: its time lies
+				// half of them after the first.
+				const double frames = static_cast<double>(track.anchor_age) -
+						      0.5 * (static_cast<double>(track.anchor_samples) - 1);
+				if (std::isfinite(track.anchor_world[0]) && frames > 0 && frame_interval_s > 0) {
+					m.anchor_world = track.anchor_world;
+					m.anchor_span_s = frames * frame_interval_s;
+				}
+			}
 		}
 		// The followed points after the matched ones: clustered, never labelled or published.
 		for (const FollowedPoint &f : followed) {

@@ -393,11 +393,13 @@ namespace {
 /// depth changes from one frame to the next say 1.5 m/s give or take 2 m/s (the disparity's noise at that
 /// range), alternating, and their x changes swing by `across_swing_mps` the same way, while their median
 /// position follows the truth within 2 cm. Per frame: the single group published with a speed, if any.
-std::vector<std::optional<TargetGroup>> closing_mover(double window_s, double across_swing_mps)
+std::vector<std::optional<TargetGroup>> closing_mover(double window_s, double across_swing_mps,
+						      bool anchored_velocity = false)
 {
 	std::mt19937 rng(5);
 	GroupParams params;
 	params.velocity_window_s = window_s;
+	params.anchored_velocity = anchored_velocity;
 	AffinityPropagation workspace;
 	GroupMemory memory;
 	GroupMotionContext context = tenth_of_a_second();
@@ -414,6 +416,11 @@ std::vector<std::optional<TargetGroup>> closing_mover(double window_s, double ac
 			points[i].xyz = now;
 			points[i].prev_xyz = now - cv::Vec3f(static_cast<float>(across_swing_mps * sign * context.dt_s),
 							     0, static_cast<float>(measured * context.dt_s));
+			// Each member's track began 0.5 s before (its anchor there, give or take 3 cm by member).
+			const float jitter = 0.03F * static_cast<float>(static_cast<int>(i % 3) - 1);
+			points[i].anchor_world =
+				cv::Vec3f(now[0], 0, static_cast<float>(9 - 1.5 * (0.1 * frame - 0.5)) + jitter);
+			points[i].anchor_span_s = 0.5;
 		}
 		GroupOutput out = find_groups(points, frame == 0 ? nullptr : &memory, context, params, workspace);
 		memory = out.memory;
@@ -447,6 +454,25 @@ TEST(Groups, AMoverAlongTheSightLineTakesItsSpeedFromItsPositions)
 	EXPECT_GT(*std::max_element(averaged.begin(), averaged.end()) -
 			  *std::min_element(averaged.begin(), averaged.end()),
 		  0.3);
+}
+
+TEST(Groups, AYoungGroupsSpeedAlongTheSightAlsoComesFromItsMembersAnchors)
+{
+	// The closing mover before its positions fill half the 0.5 s window: its speed is the running mean of
+	// frame-to-frame changes swinging by 2 m/s, unless its members' anchors (0.5 s back) speak too.
+	const auto young_errors = [](bool anchored) {
+		std::vector<double> errors;
+		for (const auto &g : closing_mover(0.5, 0, anchored))
+			if (g && g->age_frames < 6)
+				errors.push_back(std::abs(*g->speed_mps - 1.5));
+		return errors;
+	};
+	const auto without = young_errors(false), with = young_errors(true);
+	ASSERT_GE(without.size(), 3U);
+	ASSERT_EQ(with.size(), without.size());
+	EXPECT_GT(*std::max_element(without.begin(), without.end()), 0.4);
+	for (const double error : with)
+		EXPECT_LT(error, 0.2);
 }
 
 TEST(Groups, AGroupsVelocityComesWithItsUncertainty)
