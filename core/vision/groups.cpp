@@ -1047,20 +1047,27 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 				{g.clock_s, *context.world_from_curr * *cluster.position, cluster.world_velocity});
 			const cv::Vec3d ray =
 				context.world_from_curr->r * (*cluster.position / cv::norm(*cluster.position));
-			const auto spread =
-				world_velocity ? measured_spread(g.positions, kSpreadMeasurements, ray) : std::nullopt;
+			// Plain values rather than an optional read in branches: GCC's -O1 (the TSan build) takes the
+			// optional's members for uninitialised there.
+			MeasuredSpread spread;
+			bool has_spread = false;
+			if (world_velocity)
+				if (const auto measured = measured_spread(g.positions, kSpreadMeasurements, ray)) {
+					spread = *measured;
+					has_spread = true;
+				}
 			// The averages' spread: the running mean over the first 1 / smoothing measurements is their
 			// mean, the exponential average after it weighs as (2 - w) / w independent ones.
 			const double averaged = std::min(static_cast<double>(g.age_frames),
 							 (2 - params.smoothing) / std::max(params.smoothing, 1e-6));
+			const double averaged_along_variance = spread.along / averaged * spread.along_persistence;
 			std::optional<Estimate> along = velocity_along(g.positions, params.velocity_window_s, ray);
 			if (along)
-				along->variance *= spread ? spread->along_persistence : 1;
+				along->variance *= spread.along_persistence; // 1 without a spread
 			else if (world_velocity && params.anchored_velocity && cluster.anchored_velocity)
 				along = along_from_anchors(*cluster.anchored_velocity, ray, world_velocity->dot(ray),
-							   spread ? std::optional<double>(spread->along / averaged *
-											  spread->along_persistence)
-								  : std::nullopt);
+							   has_spread ? std::optional<double>(averaged_along_variance)
+								      : std::nullopt);
 			if (along && world_velocity) {
 				const cv::Vec3d fused = along_sight_from(*world_velocity, along->value, ray);
 				// The camera-frame velocity is the mover's own plus the static scene's apparent one, so
@@ -1070,10 +1077,9 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 						*velocity + context.world_from_curr->r.t() * (fused - *world_velocity);
 				world_velocity = fused;
 			}
-			if (spread) {
-				const double along_variance =
-					along ? along->variance : spread->along / averaged * spread->along_persistence;
-				const double across_variance = spread->across / averaged * spread->across_persistence;
+			if (has_spread && world_velocity) {
+				const double along_variance = along ? along->variance : averaged_along_variance;
+				const double across_variance = spread.across / averaged * spread.across_persistence;
 				sigma = {std::sqrt(along_variance), std::sqrt(across_variance)};
 				// The speed's, to first order: its direction's share of each.
 				const double speed = cv::norm(*world_velocity);
