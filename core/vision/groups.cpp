@@ -681,6 +681,20 @@ const PositionHistory::Entry &PositionHistory::newest(size_t i) const
 	return entries[(next + kCapacity - 1 - i) % kCapacity];
 }
 
+namespace {
+
+/// Two estimates with positive variances weighted by the inverse of their variances; their errors taken as
+/// fully correlated (they come from the same depths), so the weighted mean's spread is the weighted mean of
+/// their spreads, not the smaller spread of two independent ones.
+Estimate fuse_correlated(const Estimate &a, const Estimate &b)
+{
+	const double inverse = 1 / a.variance + 1 / b.variance;
+	const double spread = (1 / std::sqrt(a.variance) + 1 / std::sqrt(b.variance)) / inverse;
+	return Estimate{(a.value / a.variance + b.value / b.variance) / inverse, spread * spread};
+}
+
+} // namespace
+
 std::optional<Estimate> velocity_along(const PositionHistory &history, double window_s, const cv::Vec3d &ray)
 {
 	if (history.size == 0 || window_s <= 0)
@@ -729,13 +743,8 @@ std::optional<Estimate> velocity_along(const PositionHistory &history, double wi
 		return Estimate{slope_variance <= 0 && mean_variance <= 0 ? (slope + mean_v) / 2
 									  : (slope_variance <= 0 ? slope : mean_v),
 				0};
-	const double inverse = 1 / slope_variance + 1 / mean_variance;
-	// Both measures come from the same members' depths, so their errors go together: the weighted mean's
-	// spread is taken as the weighted mean of their spreads (fully correlated), not the smaller spread of two
-	// independent ones.
-	const double spread =
-		(std::sqrt(slope_variance) / slope_variance + std::sqrt(mean_variance) / mean_variance) / inverse;
-	return Estimate{(slope / slope_variance + mean_v / mean_variance) / inverse, spread * spread};
+	// Both measures come from the same members' depths, so their errors go together.
+	return fuse_correlated({slope, slope_variance}, {mean_v, mean_variance});
 }
 
 namespace {
@@ -813,9 +822,7 @@ std::optional<Estimate> along_from_anchors(const Estimate3 &anchored, const cv::
 		return std::nullopt;
 	if (!averaged_variance || !std::isfinite(*averaged_variance) || *averaged_variance <= 0)
 		return Estimate{value, variance};
-	const double inverse = 1 / variance + 1 / *averaged_variance;
-	const double spread = (1 / std::sqrt(variance) + 1 / std::sqrt(*averaged_variance)) / inverse;
-	return Estimate{(value / variance + averaged / *averaged_variance) / inverse, spread * spread};
+	return fuse_correlated({value, variance}, {averaged, *averaged_variance});
 }
 
 /// A group's velocity spread is taken over its newest this-many measurements: about half a second at 30 fps,

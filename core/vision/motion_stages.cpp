@@ -724,8 +724,7 @@ TrackSet pair_stage(const FrameFeatures *prev, const TrackSet *prev_tracks, Fram
 			motion.push_back(m);
 		}
 		GroupMotionContext context;
-		if (prev_tracks != nullptr && frame.device_ns > prev_tracks->t_ns)
-			context.dt_s = static_cast<double>(frame.device_ns - prev_tracks->t_ns) * 1e-9;
+		context.dt_s = frame_interval_s;
 		if (moved) {
 			context.curr_from_prev = pose->curr_from_prev;
 			context.world_from_curr = world_from_curr;
