@@ -661,6 +661,24 @@ const std::vector<Option> &options()
 		o.push_back(number(
 			"ego", "anchor_spread_min", "anchored spread: found points a young track needs beside it",
 			[](DaemonConfig &c) -> int & { return c.motion.ego.anchor_spread_min; }, 1, 100000));
+		o.push_back(number(
+			"ego", "anchor_pool_samples",
+			"pooled drift test: a track's signed depth drift counts once its anchor holds this many "
+			"depths; "
+			"0 = off",
+			[](DaemonConfig &c) -> int & { return c.motion.ego.anchor_pool_samples; }, 0, 100000));
+		o.push_back(number(
+			"ego", "anchor_pool_px", "pooled drift test: a point's neighbours lie this close (pixels)",
+			[](DaemonConfig &c) -> double & { return c.motion.ego.anchor_pool_px; }, 1, 10000));
+		o.push_back(number(
+			"ego", "anchor_pool_min",
+			"pooled drift test: points with a drift within anchor_pool_px and the spread's depth a point "
+			"needs",
+			[](DaemonConfig &c) -> int & { return c.motion.ego.anchor_pool_min; }, 1, 100000));
+		o.push_back(number(
+			"ego", "anchor_pool_sigmas",
+			"pooled drift test: the neighbourhood's summed drift over sqrt(count) must exceed this",
+			[](DaemonConfig &c) -> double & { return c.motion.ego.anchor_pool_sigmas; }, 0.1, 1000));
 		o.push_back(boolean("ego", "depth_check", "test the depth measured at frame n (seed 001 eq. 4)",
 				    [](DaemonConfig &c) -> bool & { return c.motion.ego.depth_check; }));
 		o.push_back(boolean("ego", "along_line",

@@ -106,6 +106,15 @@ struct EgoParams {
 	double anchor_spread_px = 40;
 	double anchor_spread_depth = 0.05;
 	int anchor_spread_min = 1;
+	/// The pooled drift test (pool_depth_drift): once a track's anchor holds this many depths (0 = off), its
+	/// signed drift is summed with its neighbours' within anchor_pool_px and anchor_spread_depth; at least
+	/// anchor_pool_min of them, a sum over sqrt(count) beyond anchor_pool_sigmas, found in two frames in a
+	/// row, make a point dynamic. For the output only, like the spread. It finds a walker heading at the
+	/// camera from 9 m in its 4th-6th frame instead of its 10th-13th (docs/geometry.md).
+	int anchor_pool_samples = 3;
+	double anchor_pool_px = 80;
+	int anchor_pool_min = 4;
+	double anchor_pool_sigmas = 3.5;
 	/// Motion prior: the camera keeps its velocity within these accelerations between frames. Only points
 	/// the predicted motion explains within what the accelerations allow may vote. Without it a near,
 	/// well-textured mover can win RANSAC: far points cannot tell a turn from a sideways step, so "the

@@ -232,24 +232,26 @@ void fill_pose(EgoMotion &ego, const geometry::Pose *prev_from_curr, const geome
 /// The anchored depth test (docs/geometry.md): each followed point's depth against its track's first
 /// measured position carried by the camera's motion since; points that drifted are dynamic. New tracks, and
 /// old anchors, are (re-)anchored from this frame's depth. Marks the points that failed in `failed` (which
-/// the per-frame test has filled before) and returns, per match, those the finds spread to (empty when
-/// `ego.anchor_spread_px` is 0).
+/// the per-frame test has filled before) and returns, per match, those the finds spread to and those the
+/// pooled drift test found (empty when `ego.anchor_spread_px` is 0).
 std::vector<uint8_t> anchor_tracks(TrackSet &tracks, std::span<const Match> matches, const FrameFeatures &cur,
 				   const geometry::Pose &world_from_curr, Classification &classification,
 				   const geometry::StereoRig &rig, const MotionParams &params,
 				   const TrackSet &prev_tracks, std::vector<uint8_t> &failed)
 {
 	failed.resize(matches.size(), 0);
-	// Per match for the spread, kept only when it is on: the image position, the depth, found by the test,
-	// not tested this frame.
+	// Per match for the spread and the pooled test, kept only when one is on: the image position, the depth,
+	// found by the test, not tested this frame, the signed drift.
 	const bool spreading = params.ego.anchor_spread_px > 0;
+	const bool pooling = spreading && params.ego.anchor_pool_samples > 0;
 	const size_t kept = spreading ? matches.size() : 0;
 	std::vector<cv::Point2f> px(kept);
 	std::vector<float> depth_m(kept, std::numeric_limits<float>::quiet_NaN());
 	std::vector<uint8_t> found(kept, 0), open(kept, 0);
+	std::vector<double> drift(pooling ? matches.size() : 0, std::numeric_limits<double>::quiet_NaN());
 	const double gate = chi2_quantile(1, params.ego.chi2_quantile);
 	const AnchorParams anchor{params.ego.anchor_min_frames, params.ego.anchor_max_frames,
-				  params.ego.anchor_max_speed_mps, gate};
+				  params.ego.anchor_max_speed_mps, gate, pooling ? params.ego.anchor_pool_samples : 0};
 	const bool have_texture = classification.texture_agrees.size() == matches.size();
 	const CameraInWorld camera(world_from_curr);
 	for (size_t i = 0; i < matches.size(); ++i) {
@@ -261,16 +263,18 @@ std::vector<uint8_t> anchor_tracks(TrackSet &tracks, std::span<const Match> matc
 		if (std::isfinite(xyz[2]) && xyz[2] > 0)
 			depth = DepthSample{cv::Vec3d(xyz[0], xyz[1], xyz[2]),
 					    rig.depth_sigma(xyz[2], params.stereo.disparity_sigma_px)};
-		const double statistic =
+		const AnchorTest test =
 			advance_anchor(tracks.by_keypoint[c], depth, classification.labels[i] != PointLabel::Dynamic,
 				       tracks.t_ns, camera, anchor);
 		if (spreading) {
 			px[i] = cur.keypoints[c].pt;
 			if (depth)
 				depth_m[i] = xyz[2];
-			open[i] = std::isnan(statistic) && classification.labels[i] != PointLabel::Dynamic ? 1 : 0;
+			open[i] = std::isnan(test.statistic) && classification.labels[i] != PointLabel::Dynamic ? 1 : 0;
 		}
-		if (!(statistic > gate) || (have_texture && classification.texture_agrees[i] == 0))
+		if (pooling && classification.labels[i] != PointLabel::Dynamic && !on_depth_edge(cur, c))
+			drift[i] = test.drift_sigmas;
+		if (!(test.statistic > gate) || (have_texture && classification.texture_agrees[i] == 0))
 			continue;
 		// Like the per-frame test, confirmed by a failure in the frame before (ego.confirm_frames).
 		failed[i] = 1;
@@ -283,9 +287,34 @@ std::vector<uint8_t> anchor_tracks(TrackSet &tracks, std::span<const Match> matc
 	}
 	if (!spreading)
 		return {};
-	return spread_by_depth(
+	// The pooled test's finds, confirmed on the same track in the frame before, are output-only like the
+	// spread; they also seed it, so the young tracks beside them follow.
+	std::vector<uint8_t> pooled;
+	if (pooling) {
+		pooled = pool_depth_drift(px, depth_m, drift,
+					  {params.ego.anchor_pool_px, params.ego.anchor_spread_depth,
+					   params.ego.anchor_pool_min, params.ego.anchor_pool_sigmas, 0.5});
+		for (size_t i = 0; i < matches.size(); ++i) {
+			const auto c = static_cast<size_t>(matches[i].cur);
+			if (c >= tracks.by_keypoint.size())
+				continue;
+			TrackState &state = tracks.by_keypoint[c];
+			state.pooled_frames = pooled[i] != 0
+						      ? static_cast<uint8_t>(std::min(state.pooled_frames + 1, 255))
+						      : uint8_t{0};
+			pooled[i] = state.pooled_frames >= 2 && found[i] == 0 ? 1 : 0;
+			if (pooled[i] != 0) {
+				found[i] = 1;
+				open[i] = 0;
+			}
+		}
+	}
+	std::vector<uint8_t> spread = spread_by_depth(
 		px, depth_m, found, open,
 		{params.ego.anchor_spread_px, params.ego.anchor_spread_depth, params.ego.anchor_spread_min});
+	for (size_t i = 0; i < pooled.size(); ++i)
+		spread[i] = spread[i] != 0 || pooled[i] != 0 ? 1 : 0;
+	return spread;
 }
 
 } // namespace

@@ -58,6 +58,7 @@ TrackSet follow_tracks(const TrackSet *prev, const FollowInput &input, const Cla
 		after.last_world = before.last_world;
 		after.last_sigma_m = before.last_sigma_m;
 		after.last_t_ns = before.last_t_ns;
+		after.pooled_frames = before.pooled_frames;
 	}
 	for (auto &state : out.by_keypoint)
 		if (state.id == 0)
@@ -122,10 +123,10 @@ int promote_remembered_movers(std::span<PointLabel> labels, std::span<const Matc
 	return promoted;
 }
 
-double advance_anchor(TrackState &state, const std::optional<DepthSample> &depth, bool may_start, int64_t t_ns,
-		      const CameraInWorld &camera, const AnchorParams &params)
+AnchorTest advance_anchor(TrackState &state, const std::optional<DepthSample> &depth, bool may_start, int64_t t_ns,
+			  const CameraInWorld &camera, const AnchorParams &params)
 {
-	constexpr double kNone = std::numeric_limits<double>::quiet_NaN();
+	const AnchorTest kNone;
 	const geometry::Pose &world_from_camera = camera.world_from_camera;
 	const geometry::Pose &camera_from_world = camera.camera_from_world;
 	bool anchored = std::isfinite(state.anchor_world[0]);
@@ -163,6 +164,15 @@ double advance_anchor(TrackState &state, const std::optional<DepthSample> &depth
 	}
 	if (!world)
 		return kNone;
+	AnchorTest test;
+	if (params.pool_samples > 0 && state.anchor_samples >= static_cast<uint32_t>(params.pool_samples)) {
+		const cv::Vec3d seen = camera_from_world *
+				       cv::Vec3d(state.anchor_world[0], state.anchor_world[1], state.anchor_world[2]);
+		const double variance = static_cast<double>(state.anchor_sigma_m) * state.anchor_sigma_m +
+					depth->sigma_m * depth->sigma_m;
+		if (seen[2] > 0 && variance > 0)
+			test.drift_sigmas = (seen[2] - depth->xyz_camera[2]) / std::sqrt(variance);
+	}
 	if (state.anchor_age < static_cast<uint32_t>(params.min_frames)) {
 		if (may_start) { // the mean of the positions so far, and its noise
 			const auto m = static_cast<double>(state.anchor_samples);
@@ -175,10 +185,54 @@ double advance_anchor(TrackState &state, const std::optional<DepthSample> &depth
 			state.anchor_sigma_m = static_cast<float>(std::sqrt(variance) / (m + 1));
 			++state.anchor_samples;
 		}
-		return kNone;
+		return test;
 	}
-	return anchored_depth_statistic(state.anchor_world, state.anchor_sigma_m, camera_from_world,
-					static_cast<float>(depth->xyz_camera[2]), depth->sigma_m);
+	test.statistic = anchored_depth_statistic(state.anchor_world, state.anchor_sigma_m, camera_from_world,
+						  static_cast<float>(depth->xyz_camera[2]), depth->sigma_m);
+	return test;
+}
+
+std::vector<uint8_t> pool_depth_drift(std::span<const cv::Point2f> px, std::span<const float> depth_m,
+				      std::span<const double> drift_sigmas, const DriftPoolParams &params)
+{
+	const size_t n = std::min({px.size(), depth_m.size(), drift_sigmas.size()});
+	std::vector<uint8_t> found(px.size(), 0);
+	if (params.radius_px <= 0 || params.min_points <= 0)
+		return found;
+	std::vector<size_t> with_drift;
+	for (size_t i = 0; i < n; ++i)
+		if (std::isfinite(drift_sigmas[i]) && std::isfinite(depth_m[i]) && depth_m[i] > 0)
+			with_drift.push_back(i);
+	if (with_drift.size() < static_cast<size_t>(params.min_points))
+		return found;
+	// Sorted by column, so that each point looks only at those within the radius across.
+	std::sort(with_drift.begin(), with_drift.end(), [&](size_t a, size_t b) { return px[a].x < px[b].x; });
+	const double radius2 = params.radius_px * params.radius_px;
+	size_t first = 0;
+	for (size_t a = 0; a < with_drift.size(); ++a) {
+		const size_t i = with_drift[a];
+		if (std::abs(drift_sigmas[i]) < params.own_sigmas)
+			continue;
+		while (px[with_drift[first]].x < px[i].x - static_cast<float>(params.radius_px))
+			++first;
+		double sum = 0;
+		int count = 0;
+		for (size_t b = first; b < with_drift.size(); ++b) {
+			const size_t j = with_drift[b];
+			if (px[j].x > px[i].x + static_cast<float>(params.radius_px))
+				break;
+			const cv::Point2f d = px[j] - px[i];
+			if (static_cast<double>(d.x) * d.x + static_cast<double>(d.y) * d.y > radius2 ||
+			    std::abs(depth_m[j] - depth_m[i]) > params.depth_ratio * std::min(depth_m[i], depth_m[j]))
+				continue;
+			sum += drift_sigmas[j];
+			++count;
+		}
+		if (count >= params.min_points && sum * drift_sigmas[i] > 0 &&
+		    std::abs(sum) / std::sqrt(static_cast<double>(count)) > params.sigmas)
+			found[i] = 1;
+	}
+	return found;
 }
 
 std::vector<uint8_t> spread_by_depth(std::span<const cv::Point2f> px, std::span<const float> depth_m,

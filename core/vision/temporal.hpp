@@ -61,6 +61,8 @@ struct TrackState {
 	cv::Vec3f last_world{std::numeric_limits<float>::quiet_NaN(), 0, 0};
 	float last_sigma_m = 0;
 	int64_t last_t_ns = 0;
+	/// Frames in a row the pooled drift test (pool_depth_drift) found this track's neighbourhood drifting.
+	uint8_t pooled_frames = 0;
 };
 
 /// The memory of one frame: a state per keypoint of that frame.
@@ -130,6 +132,19 @@ struct AnchorParams {
 	int max_frames = 90;	    ///< then the track is anchored again (the chained pose drifts slowly)
 	double max_speed_mps = 3.0; ///< a depth leaping faster than this since the last one starts the anchor again
 	double gate = 6.63;	    ///< chi-square (1 dof) for the leap
+	/// The pooled test's drift (AnchorTest::drift_sigmas) is measured once the anchor holds this many depths;
+	/// 0 = not measured.
+	int pool_samples = 0;
+};
+
+/// One frame of the anchored depth test for one track (advance_anchor).
+struct AnchorTest {
+	/// The anchored test's statistic (chi-square, 1 dof) once the anchor is `min_frames` old; NaN otherwise.
+	double statistic = std::numeric_limits<double>::quiet_NaN();
+	/// The depth where the anchor (its mean so far, before this frame's depth joins it) puts the point minus
+	/// the depth measured, over their joint standard deviation: signed, so that the drifts of a mover's points
+	/// add up while a static scene's noise cancels. NaN while the anchor holds fewer than `pool_samples`.
+	double drift_sigmas = std::numeric_limits<double>::quiet_NaN();
 };
 
 /// The frame's camera in the world both ways, inverted once per frame rather than once per point.
@@ -154,9 +169,9 @@ struct DepthSample {
 /// and starts again after `max_frames`, or when the depth leaps from the last one measured by more than
 /// `max_speed_mps` allows in the time since (plus both depths' noise at `gate`): a track passing from a
 /// mover onto the background behind it. Returns the statistic (anchored_depth_statistic) when the test runs
-/// in this frame, NaN otherwise.
-double advance_anchor(TrackState &state, const std::optional<DepthSample> &depth, bool may_start, int64_t t_ns,
-		      const CameraInWorld &camera, const AnchorParams &params);
+/// in this frame, and the signed drift for the pooled test.
+AnchorTest advance_anchor(TrackState &state, const std::optional<DepthSample> &depth, bool may_start, int64_t t_ns,
+			  const CameraInWorld &camera, const AnchorParams &params);
 
 /// Spreading the anchored depth test's finds (ego.anchor_spread_*, docs/geometry.md).
 struct DepthSpreadParams {
@@ -174,6 +189,26 @@ struct DepthSpreadParams {
 std::vector<uint8_t> spread_by_depth(std::span<const cv::Point2f> px, std::span<const float> depth_m,
 				     std::span<const uint8_t> found, std::span<const uint8_t> open,
 				     const DepthSpreadParams &params);
+
+/// The pooled drift test's settings (ego.anchor_pool_*, docs/geometry.md).
+struct DriftPoolParams {
+	double radius_px = 80;	   ///< a point's neighbours are this close in the image; 0 = off
+	double depth_ratio = 0.05; ///< and this close in depth, relative to the nearer
+	int min_points = 4;	   ///< points with a drift in the neighbourhood (the point's own included)
+	double sigmas = 3.5;	   ///< the neighbourhood's summed drift over sqrt(its count) must exceed this
+	double own_sigmas = 0.5;   ///< and the point's own drift this much, in the same direction
+};
+
+/// The anchored test judges each track alone, so a walker heading at the camera from 9 m is found only once
+/// a single point's depth has drifted past its own noise (about 0.6 m, 20 frames at 1 m/s). The walker's
+/// points drift together, while the static scene's noise is independent from point to point: summed over
+/// a neighbourhood at one depth, k drifts of d sigmas each make d * sqrt(k) sigmas. A point is found when
+/// at least `min_points` points with a drift (`drift_sigmas`, NaN: none) lie within `radius_px` in the image
+/// and `depth_ratio` of the nearer depth, their summed drift over sqrt(their count) exceeds `sigmas`, and its
+/// own drift has the same sign and at least `own_sigmas` (so the static ground at a walker's feet is not
+/// taken along). `px`, `depth_m` and `drift_sigmas` are per point; returns a flag per point.
+std::vector<uint8_t> pool_depth_drift(std::span<const cv::Point2f> px, std::span<const float> depth_m,
+				      std::span<const double> drift_sigmas, const DriftPoolParams &params);
 
 /// Relabels as dynamic every matched point whose memory says it moves (labels[i] belongs to matches[i]);
 /// returns how many changed. Labels the seed already made dynamic stay dynamic. `looser` (per match, may be

@@ -782,11 +782,11 @@ namespace {
 
 /// Runs a track through advance_anchor frame by frame at 30 fps, as the pair stage does (the track ages by
 /// one each frame); depths[n] < 0: no depth in frame n. The camera is at z = camera_step_m * n.
-std::vector<double> anchor_statistics(const std::vector<double> &depths, double sigma_m, double camera_step_m,
-				      const AnchorParams &params)
+std::vector<AnchorTest> anchor_tests(const std::vector<double> &depths, double sigma_m, double camera_step_m,
+				     const AnchorParams &params)
 {
 	TrackState state;
-	std::vector<double> out;
+	std::vector<AnchorTest> out;
 	for (size_t n = 0; n < depths.size(); ++n) {
 		if (n > 0)
 			++state.anchor_age;
@@ -798,6 +798,16 @@ std::vector<double> anchor_statistics(const std::vector<double> &depths, double 
 		out.push_back(advance_anchor(state, depth, true, static_cast<int64_t>(n) * 33'333'333,
 					     CameraInWorld(world_from_camera), params));
 	}
+	return out;
+}
+
+/// The statistics of anchor_tests alone.
+std::vector<double> anchor_statistics(const std::vector<double> &depths, double sigma_m, double camera_step_m,
+				      const AnchorParams &params)
+{
+	std::vector<double> out;
+	for (const AnchorTest &test : anchor_tests(depths, sigma_m, camera_step_m, params))
+		out.push_back(test.statistic);
 	return out;
 }
 
@@ -823,6 +833,75 @@ TEST(Geometry, AnchorAveragesThenTestsADrift)
 	const auto s = anchor_statistics(still, 0.05, 0.05, params);
 	for (int n = 6; n < 12; ++n)
 		EXPECT_NEAR(s[static_cast<size_t>(n)], 0, 1e-6) << n;
+}
+
+// The pooled test's signed drift, by hand. The same walker (4 cm a frame nearer from 10 m, sigma 5 cm), with the
+// drift measured once the anchor holds 3 depths: at frame 3 the anchor is the mean of frames 0-2 (9.96 m, sigma
+// 0.05 / sqrt(3)) and the depth 9.88 m, so the drift is +0.08 / sqrt(0.05^2 / 3 + 0.05^2) = +1.386 sigmas, under
+// any single point's gate; at frame 8 the anchor is the mean of frames 0-5 (9.90 m) and the depth 9.68 m: +3.81.
+// A point moving away drifts negative, a still one not at all.
+TEST(Geometry, AnchorMeasuresASignedDriftForThePooledTest)
+{
+	AnchorParams params;
+	params.pool_samples = 3;
+	std::vector<double> toward, away, still;
+	for (int n = 0; n < 10; ++n) {
+		toward.push_back(10.0 - 0.04 * n);
+		away.push_back(10.0 + 0.04 * n);
+		still.push_back(10.0 - 0.05 * n);
+	}
+	const auto t = anchor_tests(toward, 0.05, 0, params);
+	for (size_t n = 0; n < 3; ++n)
+		EXPECT_TRUE(std::isnan(t[n].drift_sigmas)) << n;
+	EXPECT_NEAR(t[3].drift_sigmas, 0.08 / std::sqrt(0.05 * 0.05 / 3 + 0.05 * 0.05), 1e-4);
+	EXPECT_NEAR(t[8].drift_sigmas, 0.22 / std::sqrt(0.05 * 0.05 / 6 + 0.05 * 0.05), 1e-4);
+	EXPECT_NEAR(t[8].statistic, t[8].drift_sigmas * t[8].drift_sigmas, 1e-3); // the anchored test's (in floats)
+	EXPECT_NEAR(anchor_tests(away, 0.05, 0, params)[8].drift_sigmas, -t[8].drift_sigmas, 1e-4);
+	const auto s = anchor_tests(still, 0.05, 0.05, params);
+	for (size_t n = 3; n < s.size(); ++n)
+		EXPECT_NEAR(s[n].drift_sigmas, 0, 1e-6) << n;
+	// Off: no drift measured.
+	EXPECT_TRUE(std::isnan(anchor_tests(toward, 0.05, 0, AnchorParams{})[8].drift_sigmas));
+}
+
+// Ten points on a walker at 9 m, each drifting +1.3 sigmas (no single one near the 2.58 a point's own test needs):
+// with the ground point beside them, (13 - 0.3) / sqrt(11) = 3.83 over the 3.5 gate, so all ten are found. Around them,
+// the static scene at the same depth, its drifts alternating +-1.2, sums to nothing; a static point beside the walker
+// whose own drift points the other way is counted but not taken along; the background 5 m behind is neither pooled with
+// the walker nor, alone, found.
+TEST(Geometry, PooledDriftFindsAMoverNoPointOfWhichDriftsPastItsOwnNoise)
+{
+	std::vector<cv::Point2f> px;
+	std::vector<float> depth;
+	std::vector<double> drift;
+	const auto add = [&](float u, float v, float z, double d) {
+		px.emplace_back(u, v);
+		depth.push_back(z);
+		drift.push_back(d);
+	};
+	for (int i = 0; i < 10; ++i) // the walker: 50 x 20 px
+		add(500.0f + 10.0f * static_cast<float>(i % 5), 400.0f + 10.0f * static_cast<float>(i / 5), 9.0f, 1.3);
+	const size_t ground = px.size();
+	add(520, 425, 9.1f, -0.3); // the ground at the walker's feet
+	const size_t behind = px.size();
+	add(490, 395, 14.0f, 3.0); // the wall behind, beside the walker in the image
+	const size_t first_static = px.size();
+	for (int i = 0; i < 40; ++i) // the static scene at the walker's depth, away from it
+		add(100.0f + 15.0f * static_cast<float>(i % 10), 100.0f + 15.0f * static_cast<float>(i / 10), 9.0f,
+		    i % 2 == 0 ? 1.2 : -1.2);
+	DriftPoolParams params; // 80 px, 5 % of the depth, 4 points, 3.5 sigmas, own 0.5
+	const std::vector<uint8_t> found = pool_depth_drift(px, depth, drift, params);
+	ASSERT_EQ(found.size(), px.size());
+	for (size_t i = 0; i < ground; ++i)
+		EXPECT_EQ(found[i], 1) << i;
+	EXPECT_EQ(found[ground], 0);
+	EXPECT_EQ(found[behind], 0);
+	for (size_t i = first_static; i < px.size(); ++i)
+		EXPECT_EQ(found[i], 0) << i;
+	// Fewer than min_points with a drift: nothing, however far they drift.
+	params.min_points = 12;
+	const std::vector<uint8_t> too_few = pool_depth_drift(px, depth, drift, params);
+	EXPECT_EQ(std::count(too_few.begin(), too_few.begin() + static_cast<std::ptrdiff_t>(ground), 1), 0);
 }
 
 // A track that passes from a mover (12 m) onto the background behind it (14 m) leaps 2 m in a frame, far
