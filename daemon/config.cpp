@@ -679,6 +679,11 @@ const std::vector<Option> &options()
 			"ego", "anchor_pool_sigmas",
 			"pooled drift test: the neighbourhood's summed drift over sqrt(count) must exceed this",
 			[](DaemonConfig &c) -> double & { return c.motion.ego.anchor_pool_sigmas; }, 0.1, 1000));
+		o.push_back(number(
+			"ego", "anchor_pool_hold_sigmas",
+			"pooled drift test: the gate for a track it found in the frames before (anchor_pool_sigmas to "
+			"turn off)",
+			[](DaemonConfig &c) -> double & { return c.motion.ego.anchor_pool_hold_sigmas; }, 0.1, 1000));
 		o.push_back(boolean("ego", "depth_check", "test the depth measured at frame n (seed 001 eq. 4)",
 				    [](DaemonConfig &c) -> bool & { return c.motion.ego.depth_check; }));
 		o.push_back(boolean("ego", "along_line",

@@ -115,6 +115,7 @@ struct EgoParams {
 	double anchor_pool_px = 80;
 	int anchor_pool_min = 4;
 	double anchor_pool_sigmas = 3.5;
+	double anchor_pool_hold_sigmas = 2.0; ///< the gate for a track found in the two frames before
 	/// Motion prior: the camera keeps its velocity within these accelerations between frames. Only points
 	/// the predicted motion explains within what the accelerations allow may vote. Without it a near,
 	/// well-textured mover can win RANSAC: far points cannot tell a turn from a sideways step, so "the

@@ -291,9 +291,16 @@ std::vector<uint8_t> anchor_tracks(TrackSet &tracks, std::span<const Match> matc
 	// spread; they also seed it, so the young tracks beside them follow.
 	std::vector<uint8_t> pooled;
 	if (pooling) {
-		pooled = pool_depth_drift(px, depth_m, drift,
+		// A track confirmed in the frames before holds at the lower gate.
+		std::vector<uint8_t> held(matches.size(), 0);
+		for (size_t i = 0; i < matches.size(); ++i) {
+			const auto c = static_cast<size_t>(matches[i].cur);
+			held[i] = c < tracks.by_keypoint.size() && tracks.by_keypoint[c].pooled_frames >= 2 ? 1 : 0;
+		}
+		pooled = pool_depth_drift(px, depth_m, drift, held,
 					  {params.ego.anchor_pool_px, params.ego.anchor_spread_depth,
-					   params.ego.anchor_pool_min, params.ego.anchor_pool_sigmas, 0.5});
+					   params.ego.anchor_pool_min, params.ego.anchor_pool_sigmas, 0.5,
+					   params.ego.anchor_pool_hold_sigmas});
 		for (size_t i = 0; i < matches.size(); ++i) {
 			const auto c = static_cast<size_t>(matches[i].cur);
 			if (c >= tracks.by_keypoint.size())

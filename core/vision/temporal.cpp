@@ -193,7 +193,8 @@ AnchorTest advance_anchor(TrackState &state, const std::optional<DepthSample> &d
 }
 
 std::vector<uint8_t> pool_depth_drift(std::span<const cv::Point2f> px, std::span<const float> depth_m,
-				      std::span<const double> drift_sigmas, const DriftPoolParams &params)
+				      std::span<const double> drift_sigmas, std::span<const uint8_t> held,
+				      const DriftPoolParams &params)
 {
 	const size_t n = std::min({px.size(), depth_m.size(), drift_sigmas.size()});
 	std::vector<uint8_t> found(px.size(), 0);
@@ -228,8 +229,9 @@ std::vector<uint8_t> pool_depth_drift(std::span<const cv::Point2f> px, std::span
 			sum += drift_sigmas[j];
 			++count;
 		}
+		const double gate = i < held.size() && held[i] != 0 ? params.hold_sigmas : params.sigmas;
 		if (count >= params.min_points && sum * drift_sigmas[i] > 0 &&
-		    std::abs(sum) / std::sqrt(static_cast<double>(count)) > params.sigmas)
+		    std::abs(sum) / std::sqrt(static_cast<double>(count)) > gate)
 			found[i] = 1;
 	}
 	return found;

@@ -197,6 +197,7 @@ struct DriftPoolParams {
 	int min_points = 4;	   ///< points with a drift in the neighbourhood (the point's own included)
 	double sigmas = 3.5;	   ///< the neighbourhood's summed drift over sqrt(its count) must exceed this
 	double own_sigmas = 0.5;   ///< and the point's own drift this much, in the same direction
+	double hold_sigmas = 2.0;  ///< the gate instead of `sigmas` for a point found in the frames before
 };
 
 /// The anchored test judges each track alone, so a walker heading at the camera from 9 m is found only once
@@ -206,9 +207,12 @@ struct DriftPoolParams {
 /// at least `min_points` points with a drift (`drift_sigmas`, NaN: none) lie within `radius_px` in the image
 /// and `depth_ratio` of the nearer depth, their summed drift over sqrt(their count) exceeds `sigmas`, and its
 /// own drift has the same sign and at least `own_sigmas` (so the static ground at a walker's feet is not
-/// taken along). `px`, `depth_m` and `drift_sigmas` are per point; returns a flag per point.
+/// taken along). A point found before (`held`, per point; may be empty) needs only `hold_sigmas`: the sum
+/// hovers about the gate while a walker comes on, and a find that flickers makes a group that does. `px`,
+/// `depth_m` and `drift_sigmas` are per point; returns a flag per point.
 std::vector<uint8_t> pool_depth_drift(std::span<const cv::Point2f> px, std::span<const float> depth_m,
-				      std::span<const double> drift_sigmas, const DriftPoolParams &params);
+				      std::span<const double> drift_sigmas, std::span<const uint8_t> held,
+				      const DriftPoolParams &params);
 
 /// Relabels as dynamic every matched point whose memory says it moves (labels[i] belongs to matches[i]);
 /// returns how many changed. Labels the seed already made dynamic stay dynamic. `looser` (per match, may be

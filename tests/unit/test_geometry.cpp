@@ -889,8 +889,8 @@ TEST(Geometry, PooledDriftFindsAMoverNoPointOfWhichDriftsPastItsOwnNoise)
 	for (int i = 0; i < 40; ++i) // the static scene at the walker's depth, away from it
 		add(100.0f + 15.0f * static_cast<float>(i % 10), 100.0f + 15.0f * static_cast<float>(i / 10), 9.0f,
 		    i % 2 == 0 ? 1.2 : -1.2);
-	DriftPoolParams params; // 80 px, 5 % of the depth, 4 points, 3.5 sigmas, own 0.5
-	const std::vector<uint8_t> found = pool_depth_drift(px, depth, drift, params);
+	DriftPoolParams params; // 80 px, 5 % of the depth, 4 points, 3.5 sigmas (2.0 to hold), own 0.5
+	const std::vector<uint8_t> found = pool_depth_drift(px, depth, drift, {}, params);
 	ASSERT_EQ(found.size(), px.size());
 	for (size_t i = 0; i < ground; ++i)
 		EXPECT_EQ(found[i], 1) << i;
@@ -898,9 +898,21 @@ TEST(Geometry, PooledDriftFindsAMoverNoPointOfWhichDriftsPastItsOwnNoise)
 	EXPECT_EQ(found[behind], 0);
 	for (size_t i = first_static; i < px.size(); ++i)
 		EXPECT_EQ(found[i], 0) << i;
+	// A walker found in the frames before holds at the lower gate (2.0): at +0.8 sigmas a point the sum is
+	// (8 - 0.3) / sqrt(11) = 2.32, not enough to be found afresh, enough to stay found.
+	for (size_t i = 0; i < ground; ++i)
+		drift[i] = 0.8;
+	const std::vector<uint8_t> afresh = pool_depth_drift(px, depth, drift, {}, params);
+	std::vector<uint8_t> held(px.size(), 0);
+	std::fill(held.begin(), held.begin() + static_cast<std::ptrdiff_t>(ground), uint8_t{1});
+	const std::vector<uint8_t> holding = pool_depth_drift(px, depth, drift, held, params);
+	for (size_t i = 0; i < ground; ++i) {
+		EXPECT_EQ(afresh[i], 0) << i;
+		EXPECT_EQ(holding[i], 1) << i;
+	}
 	// Fewer than min_points with a drift: nothing, however far they drift.
 	params.min_points = 12;
-	const std::vector<uint8_t> too_few = pool_depth_drift(px, depth, drift, params);
+	const std::vector<uint8_t> too_few = pool_depth_drift(px, depth, drift, {}, params);
 	EXPECT_EQ(std::count(too_few.begin(), too_few.begin() + static_cast<std::ptrdiff_t>(ground), 1), 0);
 }
 
