@@ -109,8 +109,9 @@ struct EgoParams {
 	/// The pooled drift test (pool_depth_drift): once a track's anchor holds this many depths (0 = off), its
 	/// signed drift is summed with its neighbours' within anchor_pool_px and anchor_spread_depth; at least
 	/// anchor_pool_min of them, a sum over sqrt(count) beyond anchor_pool_sigmas, found in two frames in a
-	/// row, make a point dynamic. For the output only, like the spread. It finds a walker heading at the
-	/// camera from 9 m in its 4th-6th frame instead of its 10th-13th (docs/geometry.md).
+	/// row, make a point dynamic (held after that at anchor_pool_hold_sigmas). For the output only, like the
+	/// spread. A walker heading at the camera with many points on it is found sooner: on the sim's `toward`,
+	/// seed 1, grouped from frame 10 instead of 22 (docs/geometry.md).
 	int anchor_pool_samples = 3;
 	double anchor_pool_px = 80;
 	int anchor_pool_min = 4;
