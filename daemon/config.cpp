@@ -664,8 +664,7 @@ const std::vector<Option> &options()
 		o.push_back(number(
 			"ego", "anchor_pool_samples",
 			"pooled drift test: a track's signed depth drift counts once its anchor holds this many "
-			"depths; "
-			"0 = off",
+			"depths; 0 = off",
 			[](DaemonConfig &c) -> int & { return c.motion.ego.anchor_pool_samples; }, 0, 100000));
 		o.push_back(number(
 			"ego", "anchor_pool_px", "pooled drift test: a point's neighbours lie this close (pixels)",

@@ -410,17 +410,24 @@ PoseEstimate estimate_pose(std::span<const cv::Vec3f> prev_xyz, std::span<const 
 	return out;
 }
 
-double anchored_depth_statistic(const cv::Vec3f &anchor_world, float anchor_sigma_m,
-				const geometry::Pose &camera_from_world, float cur_depth_m, double cur_sigma_m)
+double anchored_depth_drift(const cv::Vec3f &anchor_world, float anchor_sigma_m,
+			    const geometry::Pose &camera_from_world, double cur_depth_m, double cur_sigma_m)
 {
 	if (!std::isfinite(anchor_world[0]) || !std::isfinite(cur_depth_m) || !(cur_depth_m > 0))
 		return std::numeric_limits<double>::quiet_NaN();
 	const cv::Vec3d seen = camera_from_world * cv::Vec3d(anchor_world[0], anchor_world[1], anchor_world[2]);
 	if (!(seen[2] > 0))
 		return std::numeric_limits<double>::quiet_NaN();
-	const double d = seen[2] - cur_depth_m;
 	const double var = static_cast<double>(anchor_sigma_m) * anchor_sigma_m + cur_sigma_m * cur_sigma_m;
-	return var > 0 ? d * d / var : std::numeric_limits<double>::quiet_NaN();
+	return var > 0 ? (seen[2] - cur_depth_m) / std::sqrt(var) : std::numeric_limits<double>::quiet_NaN();
+}
+
+double anchored_depth_statistic(const cv::Vec3f &anchor_world, float anchor_sigma_m,
+				const geometry::Pose &camera_from_world, float cur_depth_m, double cur_sigma_m)
+{
+	const double drift =
+		anchored_depth_drift(anchor_world, anchor_sigma_m, camera_from_world, cur_depth_m, cur_sigma_m);
+	return drift * drift;
 }
 
 double measured_disparity_sigma(std::span<const cv::Vec3f> prev_xyz, std::span<const float> cur_depth_m,

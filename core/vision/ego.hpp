@@ -218,6 +218,11 @@ GeometricTest geometric_test(const GeometricContext &context, cv::Point2f prev_p
 
 /// The anchored depth test: `anchor_world` (the point in the world when its track began, its depth noise
 /// `anchor_sigma_m`) seen from the current camera (`camera_from_world`) against the depth measured now.
+/// The same difference signed and unsquared: the depth where the anchor puts the point minus the depth
+/// measured, over their joint standard deviation (+: nearer than the anchor says); NaN when either is missing.
+double anchored_depth_drift(const cv::Vec3f &anchor_world, float anchor_sigma_m,
+			    const geometry::Pose &camera_from_world, double cur_depth_m, double cur_sigma_m);
+
 /// Returns the normalised squared depth difference (1 degree of freedom); NaN when either depth is missing.
 double anchored_depth_statistic(const cv::Vec3f &anchor_world, float anchor_sigma_m,
 				const geometry::Pose &camera_from_world, float cur_depth_m, double cur_sigma_m);

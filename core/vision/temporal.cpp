@@ -164,31 +164,27 @@ AnchorTest advance_anchor(TrackState &state, const std::optional<DepthSample> &d
 	}
 	if (!world)
 		return kNone;
+	// This frame's depth against the anchor as it stands: the pooled test's drift and, once the anchor is old
+	// enough, the anchored test's statistic (its square).
+	const double drift = anchored_depth_drift(state.anchor_world, state.anchor_sigma_m, camera_from_world,
+						  depth->xyz_camera[2], depth->sigma_m);
 	AnchorTest test;
-	if (params.pool_samples > 0 && state.anchor_samples >= static_cast<uint32_t>(params.pool_samples)) {
-		const cv::Vec3d seen = camera_from_world *
-				       cv::Vec3d(state.anchor_world[0], state.anchor_world[1], state.anchor_world[2]);
-		const double variance = static_cast<double>(state.anchor_sigma_m) * state.anchor_sigma_m +
-					depth->sigma_m * depth->sigma_m;
-		if (seen[2] > 0 && variance > 0)
-			test.drift_sigmas = (seen[2] - depth->xyz_camera[2]) / std::sqrt(variance);
-	}
-	if (state.anchor_age < static_cast<uint32_t>(params.min_frames)) {
-		if (may_start) { // the mean of the positions so far, and its noise
-			const auto m = static_cast<double>(state.anchor_samples);
-			cv::Vec3d mean(state.anchor_world[0], state.anchor_world[1], state.anchor_world[2]);
-			mean = (mean * m + *world) / (m + 1);
-			state.anchor_world = as_float(mean);
-			const double variance =
-				static_cast<double>(state.anchor_sigma_m) * state.anchor_sigma_m * m * m +
-				depth->sigma_m * depth->sigma_m;
-			state.anchor_sigma_m = static_cast<float>(std::sqrt(variance) / (m + 1));
-			++state.anchor_samples;
-		}
+	if (params.pool_samples > 0 && state.anchor_samples >= static_cast<uint32_t>(params.pool_samples))
+		test.drift_sigmas = drift;
+	if (state.anchor_age >= static_cast<uint32_t>(params.min_frames)) {
+		test.statistic = drift * drift;
 		return test;
 	}
-	test.statistic = anchored_depth_statistic(state.anchor_world, state.anchor_sigma_m, camera_from_world,
-						  static_cast<float>(depth->xyz_camera[2]), depth->sigma_m);
+	if (may_start) { // the mean of the positions so far, and its noise
+		const auto m = static_cast<double>(state.anchor_samples);
+		cv::Vec3d mean(state.anchor_world[0], state.anchor_world[1], state.anchor_world[2]);
+		mean = (mean * m + *world) / (m + 1);
+		state.anchor_world = as_float(mean);
+		const double variance = static_cast<double>(state.anchor_sigma_m) * state.anchor_sigma_m * m * m +
+					depth->sigma_m * depth->sigma_m;
+		state.anchor_sigma_m = static_cast<float>(std::sqrt(variance) / (m + 1));
+		++state.anchor_samples;
+	}
 	return test;
 }
 
