@@ -403,6 +403,21 @@ const std::vector<Option> &options()
 			"corners detected per point kept, before the grid shares the budget (more reach weakly "
 			"textured cells)",
 			[](DaemonConfig &c) -> int & { return c.motion.features.candidates_per_feature; }, 1, 50));
+		o.push_back(enumeration(
+			"features", "candidate_selection",
+			"per_cell (each grid cell ranks its own FAST corners: plain regions keep points) | whole_image "
+			"(OpenCV's ORB detector: the image's strongest, then the grid)",
+			[](DaemonConfig &c) -> vision::CandidateSelection & {
+				return c.motion.features.candidate_selection;
+			},
+			std::vector<std::pair<std::string, vision::CandidateSelection>>{
+				{"per_cell", vision::CandidateSelection::PerCell},
+				{"whole_image", vision::CandidateSelection::WholeImage}}));
+		o.push_back(number(
+			"features", "min_corner_quality",
+			"per_cell: candidates under this fraction of the frame's strongest Harris response are dropped "
+			"(0 keeps all)",
+			[](DaemonConfig &c) -> float & { return c.motion.features.min_corner_quality; }, 0.0, 1.0));
 		o.push_back(number(
 			"features", "surf_hessian_threshold", "SURF: minimum det(H) of a keypoint",
 			[](DaemonConfig &c) -> double & { return c.motion.features.surf.hessian_threshold; }, 0, 1e6));
@@ -457,6 +472,12 @@ const std::vector<Option> &options()
 			"matching", "follow_lost_clear_px",
 			"follow_lost: not where a matched keypoint lies this close (that corner is followed already)",
 			[](DaemonConfig &c) -> float & { return c.motion.matching.follow_lost_clear_px; }, 0, 50));
+		o.push_back(number(
+			"matching", "follow_max_error_ratio",
+			"a followed point whose window differs from the frame before's by more than this many times "
+			"the "
+			"frame's median difference is refused; 0 = no check",
+			[](DaemonConfig &c) -> float & { return c.motion.matching.follow_max_error_ratio; }, 0, 1000));
 		// [classifier]
 		o.push_back(number(
 			"classifier", "ransac_threshold_px", "RANSAC inlier distance, pixels",

@@ -171,7 +171,7 @@ struct Setup {
 
 Run run(const Setup &setup, Path path, double seconds, size_t workers, Publish publish = Publish::None,
 	vision::GroupFlow flow = vision::GroupFlow::Sparse, const vision::StereoParams &stereo = {},
-	const vision::MatchParams &matching = {})
+	const vision::MatchParams &matching = {}, const vision::FeatureParams &features = {})
 {
 	std::unique_ptr<daemon::DdsPublisher> dds;
 	std::unique_ptr<Subscriber> subscriber;
@@ -199,6 +199,7 @@ Run run(const Setup &setup, Path path, double seconds, size_t workers, Publish p
 	options.motion.dense.method = flow; // the groups' members: feature matches, or seed 002's global flow
 	options.motion.stereo = stereo;
 	options.motion.matching = matching;
+	options.motion.features = features;
 	options.warm_up = setup.warm_up;
 	std::mutex m;
 	std::vector<int64_t> latencies;
@@ -282,6 +283,11 @@ int main(int argc, char **argv)
 		       "only the default stereo path, N times with matching.follow_lost on (the default) and off in "
 		       "turn, to compare the two on a noisy machine")
 		->check(CLI::Range(1, 100));
+	int candidate_pairs = 0;
+	app.add_option("--candidate-pairs", candidate_pairs,
+		       "only the default stereo path, N times with features.candidate_selection per_cell (the default) "
+		       "and whole_image in turn")
+		->check(CLI::Range(1, 100));
 	bool cold = false;
 	app.add_flag("--cold", cold,
 		     "every run without the workers' warm-up (PipelineOptions::warm_up), to compare its first frames");
@@ -323,6 +329,16 @@ int main(int argc, char **argv)
 			row("stereo + pose (default)", run(config, Path::Stereo, seconds, workers));
 			row("stereo + pose, no follow_lost", run(config, Path::Stereo, seconds, workers, Publish::None,
 								 vision::GroupFlow::Sparse, {}, no_follow_lost));
+		}
+		return 0;
+	}
+	if (candidate_pairs > 0) {
+		vision::FeatureParams whole_image;
+		whole_image.candidate_selection = vision::CandidateSelection::WholeImage;
+		for (int i = 0; i < candidate_pairs; ++i) {
+			row("stereo + pose (default)", run(config, Path::Stereo, seconds, workers));
+			row("stereo + pose, whole_image", run(config, Path::Stereo, seconds, workers, Publish::None,
+							      vision::GroupFlow::Sparse, {}, {}, whole_image));
 		}
 		return 0;
 	}

@@ -1,7 +1,11 @@
 #include "core/vision/features.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <cstdint>
+#include <cstdlib>
+#include <functional>
 #include <limits>
 
 #include <opencv2/features2d.hpp>
@@ -80,6 +84,162 @@ std::vector<cv::KeyPoint> bucket_keypoints(std::vector<cv::KeyPoint> keypoints, 
 	return kept;
 }
 
+namespace {
+
+/// OpenCV's ORB as extract_features creates it: edge threshold and patch size 31, Harris block 7, k 0.04.
+constexpr int orb_edge = 31;
+constexpr int orb_half_patch = 15;
+constexpr int harris_block = 7;
+constexpr double harris_k = 0.04;
+
+/// The Harris corner response at `at` of an 8-bit image, Sobel gradients summed over a 7 x 7 block, scaled as
+/// OpenCV's ORB scales it so the scores of candidates from different pyramid levels compare as they did.
+float harris_response(const cv::Mat &image, cv::Point at)
+{
+	const int r = harris_block / 2;
+	int64_t xx = 0, yy = 0, xy = 0;
+	for (int y = at.y - r; y <= at.y + r; ++y) {
+		const uint8_t *above = image.ptr<uint8_t>(y - 1);
+		const uint8_t *row = image.ptr<uint8_t>(y);
+		const uint8_t *below = image.ptr<uint8_t>(y + 1);
+		for (int x = at.x - r; x <= at.x + r; ++x) {
+			const int dx = (above[x + 1] - above[x - 1]) + 2 * (row[x + 1] - row[x - 1]) +
+				       (below[x + 1] - below[x - 1]);
+			const int dy = (below[x - 1] + 2 * below[x] + below[x + 1]) -
+				       (above[x - 1] + 2 * above[x] + above[x + 1]);
+			xx += dx * dx;
+			yy += dy * dy;
+			xy += dx * dy;
+		}
+	}
+	const double scale = 1.0 / (4.0 * harris_block * 255.0);
+	const double scale4 = scale * scale * scale * scale;
+	const auto a = static_cast<double>(xx), b = static_cast<double>(yy), c = static_cast<double>(xy);
+	return static_cast<float>((a * b - c * c - harris_k * (a + b) * (a + b)) * scale4);
+}
+
+/// ORB's orientation: the angle (degrees) from `at` to the intensity centroid of the disc of radius 15 around it.
+/// `half_width[v]` is the disc's half-width on row v.
+float centroid_angle(const cv::Mat &image, cv::Point at, const std::array<int, orb_half_patch + 1> &half_width)
+{
+	int64_t m10 = 0, m01 = 0;
+	for (int v = -orb_half_patch; v <= orb_half_patch; ++v) {
+		const uint8_t *row = image.ptr<uint8_t>(at.y + v);
+		const int w = half_width[static_cast<size_t>(std::abs(v))];
+		for (int u = -w; u <= w; ++u) {
+			m10 += u * row[at.x + u];
+			m01 += v * row[at.x + u];
+		}
+	}
+	return cv::fastAtan2(static_cast<float>(m01), static_cast<float>(m10));
+}
+
+} // namespace
+
+std::vector<cv::KeyPoint> detect_orb_per_cell(const cv::Mat &grey, const FeatureParams &params)
+{
+	if (grey.empty() || params.max_features <= 0)
+		return {};
+	CV_Assert(grey.type() == CV_8UC1);
+	const int grid_cols = std::max(params.grid_cols, 1);
+	const int grid_rows = std::max(params.grid_rows, 1);
+	const int cells = grid_cols * grid_rows;
+	const int kept_per_cell = std::max(params.max_features / cells, 1) * std::max(params.candidates_per_feature, 1);
+	const auto cell_of = [&](cv::Point2f pt) {
+		const int col = std::clamp(
+			static_cast<int>(pt.x * static_cast<float>(grid_cols) / static_cast<float>(grey.cols)), 0,
+			grid_cols - 1);
+		const int row = std::clamp(
+			static_cast<int>(pt.y * static_cast<float>(grid_rows) / static_cast<float>(grey.rows)), 0,
+			grid_rows - 1);
+		return static_cast<size_t>(row * grid_cols + col);
+	};
+
+	// The pyramid as cv::ORB builds it (each level resized from the one before), so the octave and position
+	// of a keypoint mean the same to cv::ORB::compute.
+	const int levels = std::max(params.orb_levels, 1);
+	std::vector<cv::Mat> pyramid(static_cast<size_t>(levels));
+	std::vector<float> level_scale(static_cast<size_t>(levels));
+	pyramid[0] = grey;
+	level_scale[0] = 1.0F;
+	for (size_t level = 1; level < pyramid.size(); ++level) {
+		level_scale[level] = level_scale[level - 1] * params.orb_scale;
+		const cv::Size size(cvRound(static_cast<float>(grey.cols) / level_scale[level]),
+				    cvRound(static_cast<float>(grey.rows) / level_scale[level]));
+		if (size.width <= 2 * orb_edge || size.height <= 2 * orb_edge) {
+			pyramid.resize(level);
+			break;
+		}
+		cv::resize(pyramid[level - 1], pyramid[level], size, 0, 0, cv::INTER_LINEAR);
+	}
+
+	// Each cell keeps its strongest corners by FAST score, from every level at once.
+	std::vector<std::vector<cv::KeyPoint>> buckets(static_cast<size_t>(cells));
+	std::vector<cv::KeyPoint> corners;
+	for (size_t level = 0; level < pyramid.size(); ++level) {
+		const cv::Mat &image = pyramid[level];
+		corners.clear();
+		cv::FAST(image, corners, params.orb_fast_threshold, true);
+		for (cv::KeyPoint corner : corners) {
+			// As cv::ORB: nothing within the edge threshold of the level's border (the descriptor's patch).
+			if (corner.pt.x < orb_edge || corner.pt.y < orb_edge ||
+			    corner.pt.x >= static_cast<float>(image.cols - orb_edge) ||
+			    corner.pt.y >= static_cast<float>(image.rows - orb_edge))
+				continue;
+			corner.octave = static_cast<int>(level);
+			corner.pt *= level_scale[level];
+			corner.size = static_cast<float>(orb_edge) * level_scale[level];
+			buckets[cell_of(corner.pt)].push_back(corner);
+		}
+	}
+	const auto stronger = [](const cv::KeyPoint &a, const cv::KeyPoint &b) { return a.response > b.response; };
+	std::vector<cv::KeyPoint> candidates;
+	candidates.reserve(static_cast<size_t>(kept_per_cell) * buckets.size());
+	for (auto &bucket : buckets) {
+		if (bucket.size() > static_cast<size_t>(kept_per_cell)) {
+			std::nth_element(bucket.begin(), bucket.begin() + kept_per_cell, bucket.end(), stronger);
+			bucket.resize(static_cast<size_t>(kept_per_cell));
+		}
+		for (cv::KeyPoint &candidate : bucket) {
+			const float s = level_scale[static_cast<size_t>(candidate.octave)];
+			const cv::Point at(cvRound(candidate.pt.x / s), cvRound(candidate.pt.y / s));
+			candidate.response = harris_response(pyramid[static_cast<size_t>(candidate.octave)], at);
+			candidates.push_back(candidate);
+		}
+	}
+	// Corners far weaker than the image's best are the sensor's noise on a plain surface, not structure
+	// (goodFeaturesToTrack's quality level): they would take a cell's share from nothing.
+	if (params.min_corner_quality > 0.0F && !candidates.empty()) {
+		// The frame's best, as the 99th percentile: one outstanding corner (a lamp's edge against the sky) must
+		// not set the floor for every other.
+		std::vector<float> responses(candidates.size());
+		std::transform(candidates.begin(), candidates.end(), responses.begin(),
+			       [](const cv::KeyPoint &c) { return c.response; });
+		const auto rank = static_cast<std::ptrdiff_t>(responses.size() / 100);
+		std::nth_element(responses.begin(), responses.begin() + rank, responses.end(), std::greater<>());
+		const float best = responses[static_cast<size_t>(rank)];
+		const float floor = best * params.min_corner_quality;
+		std::erase_if(candidates, [floor](const cv::KeyPoint &c) { return c.response < floor; });
+	}
+	std::vector<cv::KeyPoint> kept =
+		bucket_keypoints(std::move(candidates), grey.size(), grid_cols, grid_rows, params.max_features);
+
+	std::array<int, orb_half_patch + 1> half_width{};
+	// The disc holds (u, v) where u^2 + v^2 <= r (r + 1): symmetric in u and v, so the angle turns with the image.
+	for (int v = 0; v <= orb_half_patch; ++v) {
+		int w = 0;
+		while ((w + 1) * (w + 1) + v * v <= orb_half_patch * (orb_half_patch + 1))
+			++w;
+		half_width[static_cast<size_t>(v)] = w;
+	}
+	for (cv::KeyPoint &kp : kept) {
+		const float s = level_scale[static_cast<size_t>(kp.octave)];
+		const cv::Point at(cvRound(kp.pt.x / s), cvRound(kp.pt.y / s));
+		kp.angle = centroid_angle(pyramid[static_cast<size_t>(kp.octave)], at, half_width);
+	}
+	return kept;
+}
+
 FrameFeatures extract_features(const cv::Mat &image, const FeatureParams &params, int colour_radius,
 			       const cv::Mat *grey_given)
 {
@@ -97,12 +257,16 @@ FrameFeatures extract_features(const cv::Mat &image, const FeatureParams &params
 	// Detect several times the budget, then bucket: the grid decides which survive, not raw response.
 	const int detected_at_most = params.max_features * std::max(params.candidates_per_feature, 1);
 	if (params.detector == Detector::Orb) {
-		auto orb = cv::ORB::create(detected_at_most, params.orb_scale, params.orb_levels, 31, 0, 2,
-					   cv::ORB::HARRIS_SCORE, 31, params.orb_fast_threshold);
-		std::vector<cv::KeyPoint> detected;
-		orb->detect(grey, detected);
-		features.keypoints = bucket_keypoints(std::move(detected), grey.size(), params.grid_cols,
-						      params.grid_rows, params.max_features);
+		auto orb = cv::ORB::create(detected_at_most, params.orb_scale, params.orb_levels, orb_edge, 0, 2,
+					   cv::ORB::HARRIS_SCORE, orb_edge, params.orb_fast_threshold);
+		if (params.candidate_selection == CandidateSelection::PerCell && grey.type() == CV_8UC1) {
+			features.keypoints = detect_orb_per_cell(grey, params);
+		} else {
+			std::vector<cv::KeyPoint> detected;
+			orb->detect(grey, detected);
+			features.keypoints = bucket_keypoints(std::move(detected), grey.size(), params.grid_cols,
+							      params.grid_rows, params.max_features);
+		}
 		orb->compute(grey, features.keypoints, features.descriptors);
 		features.norm_type = cv::NORM_HAMMING;
 	} else {

@@ -15,6 +15,15 @@ namespace stereod::vision {
 
 enum class Detector : uint8_t { Orb, Surf };
 
+/// Where ORB's candidate corners are chosen before the grid shares the budget out.
+enum class CandidateSelection : uint8_t {
+	/// FAST corners ranked within each grid cell, then scored by Harris there: a weakly textured cell (a plain
+	/// coat, a walker's smooth photograph) keeps candidates however strong the rest of the image is.
+	PerCell,
+	/// OpenCV's ORB detector: the strongest candidates over the whole image (per pyramid level), then the grid.
+	WholeImage,
+};
+
 struct FeatureParams {
 	Detector detector = Detector::Orb;
 	int max_features = 1000; ///< after bucketing
@@ -23,10 +32,15 @@ struct FeatureParams {
 	int orb_levels = 4;	 ///< pyramid levels (OpenCV's default 8 costs twice as much for little gain here)
 	float orb_scale = 1.2F;
 	int orb_fast_threshold = 12;
-	/// Candidates detected per kept point before bucketing. The detector keeps its strongest candidates
-	/// over the whole image, so with few of them a weakly textured region (a plain coat filling a grid
-	/// cell) has none left for its cell to keep, however the grid shares the budget.
+	/// Candidates per kept point before bucketing: per cell with CandidateSelection::PerCell, over the whole
+	/// image with WholeImage, where with few of them a weakly textured region (a plain coat filling a grid cell)
+	/// has none left for its cell to keep, however the grid shares the budget.
 	int candidates_per_feature = 3;
+	CandidateSelection candidate_selection = CandidateSelection::PerCell;
+	/// With PerCell: candidates whose Harris response is under this fraction of the frame's strongest are
+	/// dropped (0 keeps all), as goodFeaturesToTrack's quality level. 0.001 keeps 1 in 3 of vtest's background
+	/// corners and most on people (docs/features.md).
+	float min_corner_quality = 0.01F;
 	SurfParams surf; ///< when detector is Surf (max_features above still applies)
 };
 
@@ -70,6 +84,12 @@ cv::Vec3f sample_colour(const cv::Mat &image, cv::Point2f at, int radius);
 /// keypoints allowed than cells, the strongest cell winners are kept. Nothing for an empty image.
 std::vector<cv::KeyPoint> bucket_keypoints(std::vector<cv::KeyPoint> keypoints, cv::Size image_size, int grid_cols,
 					   int grid_rows, int max_total);
+
+/// ORB keypoints chosen cell by cell (CandidateSelection::PerCell): FAST on each pyramid level, each grid cell's
+/// `candidates_per_feature` x its share strongest by FAST score, those scored by Harris as OpenCV's ORB scores
+/// them, then bucket_keypoints; each kept keypoint gets ORB's intensity-centroid angle, octave and size, ready
+/// for cv::ORB::compute. `grey` is 8-bit single channel.
+std::vector<cv::KeyPoint> detect_orb_per_cell(const cv::Mat &grey, const FeatureParams &params);
 
 /// Detects, buckets and describes; `image` is BGR or grey. Colours are patch means of radius colour_radius.
 /// `grey`, when given, is `image` already converted (it saves the conversion when the caller has it).

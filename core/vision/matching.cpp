@@ -256,13 +256,20 @@ const std::vector<cv::Mat> &pyramid_of(const FrameFeatures &features, std::vecto
 /// guess in `to` (overwritten); `status` 0 where it was lost.
 void follow_by_lk(const std::vector<cv::Mat> &from_pyramid, const std::vector<cv::Mat> &to_pyramid,
 		  const std::vector<cv::Point2f> &from, std::vector<cv::Point2f> &to, std::vector<uchar> &status,
-		  const MatchParams &params)
+		  const MatchParams &params, std::vector<float> &error)
 {
-	std::vector<float> error;
 	cv::calcOpticalFlowPyrLK(from_pyramid, to_pyramid, from, to, status, error,
 				 cv::Size(params.rescue_window_px, params.rescue_window_px), kRescueLevels - 1,
 				 cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 10, 0.03),
 				 cv::OPTFLOW_USE_INITIAL_FLOW);
+}
+
+void follow_by_lk(const std::vector<cv::Mat> &from_pyramid, const std::vector<cv::Mat> &to_pyramid,
+		  const std::vector<cv::Point2f> &from, std::vector<cv::Point2f> &to, std::vector<uchar> &status,
+		  const MatchParams &params)
+{
+	std::vector<float> error;
+	follow_by_lk(from_pyramid, to_pyramid, from, to, status, params, error);
 }
 
 /// Across which way the window (side `window`) around `at` is one-sided: the unit eigenvector of its structure
@@ -489,10 +496,27 @@ std::vector<FollowedPoint> follow_unmatched(const FrameFeatures &prev, const Fra
 	const std::vector<cv::Mat> &prev_pyramid = pyramid_of(prev, prev_scratch, params);
 	const std::vector<cv::Mat> &cur_pyramid = pyramid_of(cur, cur_scratch, params);
 	std::vector<uchar> status, back_status;
-	follow_by_lk(prev_pyramid, cur_pyramid, from, to, status, params);
+	std::vector<float> error;
+	follow_by_lk(prev_pyramid, cur_pyramid, from, to, status, params, error);
 	std::vector<cv::Point2f> back = from;
 	follow_by_lk(cur_pyramid, prev_pyramid, to, back, back_status, params);
 	const float back2 = params.rescue_back_px * params.rescue_back_px;
+	// The windows' difference a followed point may have: a multiple of the frame's median, so the gate follows
+	// the footage's noise and contrast.
+	float max_error = std::numeric_limits<float>::infinity();
+	if (params.follow_max_error_ratio > 0) {
+		std::vector<float> landed_errors;
+		landed_errors.reserve(error.size());
+		for (size_t k = 0; k < error.size(); ++k)
+			if (status[k] != 0)
+				landed_errors.push_back(error[k]);
+		if (!landed_errors.empty()) {
+			auto middle = landed_errors.begin() + static_cast<std::ptrdiff_t>(landed_errors.size() / 2);
+			std::nth_element(landed_errors.begin(), middle, landed_errors.end());
+			// At least a grey level: on clean synthetic frames the median is near 0.
+			max_error = params.follow_max_error_ratio * std::max(*middle, 1.0F);
+		}
+	}
 	const auto inside = [&](cv::Point2f p) {
 		return p.x >= 0 && p.y >= 0 && p.x < static_cast<float>(cur.grey.cols) &&
 		       p.y < static_cast<float>(cur.grey.rows);
@@ -500,7 +524,8 @@ std::vector<FollowedPoint> follow_unmatched(const FrameFeatures &prev, const Fra
 	std::vector<FollowedPoint> followed;
 	for (size_t k = 0; k < index.size(); ++k) {
 		const cv::Point2f round_trip = back[k] - from[k];
-		if (status[k] == 0 || back_status[k] == 0 || !inside(to[k]) || !(round_trip.dot(round_trip) <= back2))
+		if (status[k] == 0 || back_status[k] == 0 || !inside(to[k]) || !(round_trip.dot(round_trip) <= back2) ||
+		    error[k] > max_error)
 			continue;
 		const cv::Point2f across =
 			aperture_ratio > 0 && prev_pyramid.size() > 1

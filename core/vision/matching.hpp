@@ -41,6 +41,12 @@ struct MatchParams {
 	bool follow_lost = true;
 	/// Not where a matched keypoint of this frame lies this close: that corner is followed already.
 	float follow_lost_clear_px = 2;
+	/// follow_unmatched refuses a point whose window, where Lucas-Kanade lands, differs from its window in the
+	/// frame before by more than this many times the median difference of the points it followed in the frame (mean
+	/// absolute grey difference, OpenCV's Lucas-Kanade error): Lucas-Kanade set off from a wrong prediction settles
+	/// in a window that does not look like the corner, and following it back from the corner's own position, as the
+	/// back check does, settles there again. 0: no such check.
+	float follow_max_error_ratio = 8;
 };
 
 struct Match {

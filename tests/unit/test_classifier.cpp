@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <map>
 #include <random>
 
@@ -552,4 +553,96 @@ TEST(Features, EmptyImagesAreNotRead)
 	std::vector<cv::KeyPoint> keypoints = {cv::KeyPoint(1, 1, 7)};
 	EXPECT_TRUE(bucket_keypoints(keypoints, {0, 0}, 8, 6, 100).empty());
 	EXPECT_TRUE(extract_features(cv::Mat(0, 0, CV_8UC3), FeatureParams{}, 1).keypoints.empty());
+}
+
+namespace {
+
+/// The same texture on both halves, the right half's contrast scaled by `right_contrast` about mid-grey.
+cv::Mat halves_of_unequal_contrast(double right_contrast)
+{
+	cv::Mat grey;
+	cv::cvtColor(textured_image(640, 480, 11, 1.5), grey, cv::COLOR_BGR2GRAY);
+	cv::Mat right = grey.colRange(320, 640);
+	right.convertTo(right, CV_8U, right_contrast, 128.0 * (1.0 - right_contrast));
+	return grey;
+}
+
+double share_on_the_right(const std::vector<cv::KeyPoint> &keypoints)
+{
+	if (keypoints.empty())
+		return 0;
+	const auto right = std::count_if(keypoints.begin(), keypoints.end(),
+					 [](const cv::KeyPoint &kp) { return kp.pt.x >= 320.0F; });
+	return static_cast<double>(right) / static_cast<double>(keypoints.size());
+}
+
+FeatureParams half_image_params(CandidateSelection selection, float min_corner_quality)
+{
+	FeatureParams params;
+	params.max_features = 200;
+	params.grid_cols = 4;
+	params.grid_rows = 4;
+	params.candidate_selection = selection;
+	params.min_corner_quality = min_corner_quality;
+	return params;
+}
+
+} // namespace
+
+TEST(Features, CandidatesChosenPerCellReachAWeaklyTexturedHalf)
+{
+	// Harris grows with the fourth power of contrast: at 0.4 the right half's corners score about 2.6 % of the
+	// left's, so over the whole image the left's take nearly all the candidates before the grid shares out.
+	const cv::Mat grey = halves_of_unequal_contrast(0.4);
+	const auto whole = extract_features(grey, half_image_params(CandidateSelection::WholeImage, 0.01F), 1);
+	const auto per_cell = extract_features(grey, half_image_params(CandidateSelection::PerCell, 0.01F), 1);
+	EXPECT_LT(share_on_the_right(whole.keypoints), 0.2);
+	EXPECT_GT(share_on_the_right(per_cell.keypoints), 0.4) << "each cell keeps its own share";
+	EXPECT_LE(per_cell.keypoints.size(), 200U);
+	EXPECT_GT(per_cell.keypoints.size(), 150U);
+	ASSERT_EQ(per_cell.descriptors.rows, static_cast<int>(per_cell.keypoints.size()));
+
+	// Each keypoint as cv::ORB gives it: its pyramid level, the patch size scaled to it, an orientation.
+	for (const auto &kp : per_cell.keypoints) {
+		ASSERT_GE(kp.octave, 0);
+		ASSERT_LT(kp.octave, half_image_params(CandidateSelection::PerCell, 0).orb_levels);
+		EXPECT_NEAR(kp.size, 31.0 * std::pow(1.2, kp.octave), 1e-3);
+		EXPECT_GE(kp.angle, 0.0F);
+		EXPECT_LT(kp.angle, 360.0F);
+	}
+	// The orientation is the intensity centroid's: the same texture turned by 90 degrees turns it with it.
+	cv::Mat turned;
+	cv::rotate(grey, turned, cv::ROTATE_90_COUNTERCLOCKWISE);
+	const auto before = detect_orb_per_cell(grey, half_image_params(CandidateSelection::PerCell, 0.01F));
+	const auto after = detect_orb_per_cell(turned, half_image_params(CandidateSelection::PerCell, 0.01F));
+	int compared = 0, agreeing = 0;
+	for (const auto &kp : before) {
+		if (kp.octave != 0)
+			continue;
+		// (x, y) -> (y, W - 1 - x) under a quarter turn counter-clockwise.
+		const cv::Point2f moved(kp.pt.y, static_cast<float>(grey.cols - 1) - kp.pt.x);
+		for (const auto &other : after) {
+			if (other.octave == 0 && cv::norm(other.pt - moved) < 0.5) {
+				++compared;
+				// Image y points down, so a counter-clockwise quarter turn takes 90 degrees off the
+				// angle.
+				const double d = std::fmod(kp.angle - 90.0 - other.angle + 720.0, 360.0);
+				agreeing += std::min(d, 360.0 - d) < 1.0; // fastAtan2 is good to about 0.3 degrees
+			}
+		}
+	}
+	ASSERT_GT(compared, 20);
+	EXPECT_EQ(agreeing, compared);
+}
+
+TEST(Features, TheQualityFloorDropsCornersFarWeakerThanTheBest)
+{
+	// At 0.25 the right half's Harris scores are about 0.4 % of the left's: under a floor of 1 %, over one of 0.1
+	// %.
+	const cv::Mat grey = halves_of_unequal_contrast(0.25);
+	const auto floored = detect_orb_per_cell(grey, half_image_params(CandidateSelection::PerCell, 0.01F));
+	const auto lenient = detect_orb_per_cell(grey, half_image_params(CandidateSelection::PerCell, 0.001F));
+	EXPECT_LT(share_on_the_right(floored), 0.02);
+	EXPECT_GT(share_on_the_right(lenient), 0.2) << "fewer FAST corners there, but its cells keep them";
+	EXPECT_TRUE(detect_orb_per_cell(cv::Mat(), FeatureParams{}).empty());
 }
