@@ -415,8 +415,8 @@ const std::vector<Option> &options()
 				{"whole_image", vision::CandidateSelection::WholeImage}}));
 		o.push_back(number(
 			"features", "min_corner_quality",
-			"per_cell: candidates under this fraction of the frame's strongest Harris response are dropped "
-			"(0 keeps all)",
+			"per_cell: candidates under this fraction of the frame's strongest Harris response (its 99th "
+			"percentile) are dropped; 0 keeps all",
 			[](DaemonConfig &c) -> float & { return c.motion.features.min_corner_quality; }, 0.0, 1.0));
 		o.push_back(number(
 			"features", "surf_hessian_threshold", "SURF: minimum det(H) of a keypoint",
@@ -474,8 +474,7 @@ const std::vector<Option> &options()
 			[](DaemonConfig &c) -> float & { return c.motion.matching.follow_lost_clear_px; }, 0, 50));
 		o.push_back(number(
 			"matching", "follow_max_error_ratio",
-			"a followed point whose window differs from the frame before's by more than this many times "
-			"the "
+			"a followed point whose window differs from the corner's by more than this many times the "
 			"frame's median difference is refused; 0 = no check",
 			[](DaemonConfig &c) -> float & { return c.motion.matching.follow_max_error_ratio; }, 0, 1000));
 		// [classifier]

@@ -39,6 +39,23 @@ cv::Vec3f sample_colour(const cv::Mat &image, cv::Point2f at, int radius)
 	return sum / static_cast<float>((x1 - x0 + 1) * (y1 - y0 + 1));
 }
 
+namespace {
+
+/// The cell of a grid_cols x grid_rows grid over an image of `image_size` that `pt` falls in, row-major; points
+/// outside the image count in the nearest cell.
+size_t grid_cell(cv::Point2f pt, cv::Size image_size, int grid_cols, int grid_rows)
+{
+	const int col = std::clamp(
+		static_cast<int>(pt.x * static_cast<float>(grid_cols) / static_cast<float>(image_size.width)), 0,
+		grid_cols - 1);
+	const int row = std::clamp(
+		static_cast<int>(pt.y * static_cast<float>(grid_rows) / static_cast<float>(image_size.height)), 0,
+		grid_rows - 1);
+	return static_cast<size_t>(row * grid_cols + col);
+}
+
+} // namespace
+
 std::vector<cv::KeyPoint> bucket_keypoints(std::vector<cv::KeyPoint> keypoints, cv::Size image_size, int grid_cols,
 					   int grid_rows, int max_total)
 {
@@ -49,15 +66,8 @@ std::vector<cv::KeyPoint> bucket_keypoints(std::vector<cv::KeyPoint> keypoints, 
 	const int cells = grid_cols * grid_rows;
 	const int per_cell = std::max(max_total / cells, 1);
 	std::vector<std::vector<cv::KeyPoint>> buckets(static_cast<size_t>(cells));
-	for (const auto &kp : keypoints) {
-		const int col = std::clamp(static_cast<int>(kp.pt.x * static_cast<float>(grid_cols) /
-							    static_cast<float>(image_size.width)),
-					   0, grid_cols - 1);
-		const int row = std::clamp(static_cast<int>(kp.pt.y * static_cast<float>(grid_rows) /
-							    static_cast<float>(image_size.height)),
-					   0, grid_rows - 1);
-		buckets[static_cast<size_t>(row * grid_cols + col)].push_back(kp);
-	}
+	for (const auto &kp : keypoints)
+		buckets[grid_cell(kp.pt, image_size, grid_cols, grid_rows)].push_back(kp);
 	const auto stronger = [](const cv::KeyPoint &a, const cv::KeyPoint &b) { return a.response > b.response; };
 	std::vector<cv::KeyPoint> kept;
 	kept.reserve(static_cast<size_t>(max_total));
@@ -118,14 +128,29 @@ float harris_response(const cv::Mat &image, cv::Point at)
 	return static_cast<float>((a * b - c * c - harris_k * (a + b) * (a + b)) * scale4);
 }
 
-/// ORB's orientation: the angle (degrees) from `at` to the intensity centroid of the disc of radius 15 around it.
-/// `half_width[v]` is the disc's half-width on row v.
-float centroid_angle(const cv::Mat &image, cv::Point at, const std::array<int, orb_half_patch + 1> &half_width)
+/// The half-width, row by row, of the disc of radius 15 that ORB's orientation is measured on: it holds (u, v)
+/// where u^2 + v^2 <= r (r + 1), symmetric in u and v, so the angle turns with the image.
+constexpr std::array<int, orb_half_patch + 1> disc_half_widths()
+{
+	std::array<int, orb_half_patch + 1> half_width{};
+	for (int v = 0; v <= orb_half_patch; ++v) {
+		int w = 0;
+		while ((w + 1) * (w + 1) + v * v <= orb_half_patch * (orb_half_patch + 1))
+			++w;
+		half_width[static_cast<size_t>(v)] = w;
+	}
+	return half_width;
+}
+
+constexpr std::array<int, orb_half_patch + 1> disc_half_width = disc_half_widths();
+
+/// ORB's orientation: the angle (degrees) from `at` to the intensity centroid of the disc around it.
+float centroid_angle(const cv::Mat &image, cv::Point at)
 {
 	int64_t m10 = 0, m01 = 0;
 	for (int v = -orb_half_patch; v <= orb_half_patch; ++v) {
 		const uint8_t *row = image.ptr<uint8_t>(at.y + v);
-		const int w = half_width[static_cast<size_t>(std::abs(v))];
+		const int w = disc_half_width[static_cast<size_t>(std::abs(v))];
 		for (int u = -w; u <= w; ++u) {
 			m10 += u * row[at.x + u];
 			m01 += v * row[at.x + u];
@@ -145,15 +170,6 @@ std::vector<cv::KeyPoint> detect_orb_per_cell(const cv::Mat &grey, const Feature
 	const int grid_rows = std::max(params.grid_rows, 1);
 	const int cells = grid_cols * grid_rows;
 	const int kept_per_cell = std::max(params.max_features / cells, 1) * std::max(params.candidates_per_feature, 1);
-	const auto cell_of = [&](cv::Point2f pt) {
-		const int col = std::clamp(
-			static_cast<int>(pt.x * static_cast<float>(grid_cols) / static_cast<float>(grey.cols)), 0,
-			grid_cols - 1);
-		const int row = std::clamp(
-			static_cast<int>(pt.y * static_cast<float>(grid_rows) / static_cast<float>(grey.rows)), 0,
-			grid_rows - 1);
-		return static_cast<size_t>(row * grid_cols + col);
-	};
 
 	// The pyramid as cv::ORB builds it (each level resized from the one before), so the octave and position
 	// of a keypoint mean the same to cv::ORB::compute.
@@ -189,7 +205,7 @@ std::vector<cv::KeyPoint> detect_orb_per_cell(const cv::Mat &grey, const Feature
 			corner.octave = static_cast<int>(level);
 			corner.pt *= level_scale[level];
 			corner.size = static_cast<float>(orb_edge) * level_scale[level];
-			buckets[cell_of(corner.pt)].push_back(corner);
+			buckets[grid_cell(corner.pt, grey.size(), grid_cols, grid_rows)].push_back(corner);
 		}
 	}
 	const auto stronger = [](const cv::KeyPoint &a, const cv::KeyPoint &b) { return a.response > b.response; };
@@ -224,18 +240,10 @@ std::vector<cv::KeyPoint> detect_orb_per_cell(const cv::Mat &grey, const Feature
 	std::vector<cv::KeyPoint> kept =
 		bucket_keypoints(std::move(candidates), grey.size(), grid_cols, grid_rows, params.max_features);
 
-	std::array<int, orb_half_patch + 1> half_width{};
-	// The disc holds (u, v) where u^2 + v^2 <= r (r + 1): symmetric in u and v, so the angle turns with the image.
-	for (int v = 0; v <= orb_half_patch; ++v) {
-		int w = 0;
-		while ((w + 1) * (w + 1) + v * v <= orb_half_patch * (orb_half_patch + 1))
-			++w;
-		half_width[static_cast<size_t>(v)] = w;
-	}
 	for (cv::KeyPoint &kp : kept) {
 		const float s = level_scale[static_cast<size_t>(kp.octave)];
 		const cv::Point at(cvRound(kp.pt.x / s), cvRound(kp.pt.y / s));
-		kp.angle = centroid_angle(pyramid[static_cast<size_t>(kp.octave)], at, half_width);
+		kp.angle = centroid_angle(pyramid[static_cast<size_t>(kp.octave)], at);
 	}
 	return kept;
 }

@@ -37,9 +37,9 @@ struct FeatureParams {
 	/// has none left for its cell to keep, however the grid shares the budget.
 	int candidates_per_feature = 3;
 	CandidateSelection candidate_selection = CandidateSelection::PerCell;
-	/// With PerCell: candidates whose Harris response is under this fraction of the frame's strongest are
-	/// dropped (0 keeps all), as goodFeaturesToTrack's quality level. 0.001 keeps 1 in 3 of vtest's background
-	/// corners and most on people (docs/features.md).
+	/// With PerCell: candidates whose Harris response is under this fraction of the frame's strongest (its 99th
+	/// percentile, so one outstanding corner does not set it) are dropped (0 keeps all), as goodFeaturesToTrack's
+	/// quality level: plain floors do not take a cell's share with the sensor's noise (docs/groups.md, Stop 55).
 	float min_corner_quality = 0.01F;
 	SurfParams surf; ///< when detector is Surf (max_features above still applies)
 };
