@@ -91,11 +91,14 @@ int main(int argc, char **argv)
 			return static_cast<size_t>(d.rows);
 		};
 	};
-	auto bucketed_orb = [&](vision::CandidateSelection selection) {
-		return [&colour, n, selection] {
+	// first_pass < 0: the default first FAST pass; 0: one pass at the configured threshold (the same keypoints)
+	auto bucketed_orb = [&](vision::CandidateSelection selection, int first_pass = -1) {
+		return [&colour, n, selection, first_pass] {
 			vision::FeatureParams p;
 			p.max_features = n;
 			p.candidate_selection = selection;
+			if (first_pass >= 0)
+				p.orb_fast_first_pass_threshold = first_pass;
 			return vision::extract_features(colour, p, 1).keypoints.size();
 		};
 	};
@@ -108,6 +111,8 @@ int main(int argc, char **argv)
 		{"ORB (OpenCV, 8 levels)", measure(repeats, opencv(cv::ORB::create(n)))},
 		{"ORB bucketed (our ORB path, candidates per cell: the default)",
 		 measure(repeats, bucketed_orb(vision::CandidateSelection::PerCell))},
+		{"ORB bucketed (candidates per cell, FAST in one pass: the same keypoints)",
+		 measure(repeats, bucketed_orb(vision::CandidateSelection::PerCell, 0))},
 		{"ORB bucketed (our ORB path, candidates over the whole image)",
 		 measure(repeats, bucketed_orb(vision::CandidateSelection::WholeImage))},
 	};

@@ -288,6 +288,11 @@ int main(int argc, char **argv)
 		       "only the default stereo path, N times with features.candidate_selection per_cell (the default) "
 		       "and whole_image in turn")
 		->check(CLI::Range(1, 100));
+	int fast_pass_pairs = 0;
+	app.add_option("--fast-pass-pairs", fast_pass_pairs,
+		       "only the default stereo path, N times with ORB's first FAST pass at a high threshold (the "
+		       "default) and with one pass at the configured threshold in turn (the same keypoints)")
+		->check(CLI::Range(1, 100));
 	bool cold = false;
 	app.add_flag("--cold", cold,
 		     "every run without the workers' warm-up (PipelineOptions::warm_up), to compare its first frames");
@@ -339,6 +344,16 @@ int main(int argc, char **argv)
 			row("stereo + pose (default)", run(config, Path::Stereo, seconds, workers));
 			row("stereo + pose, whole_image", run(config, Path::Stereo, seconds, workers, Publish::None,
 							      vision::GroupFlow::Sparse, {}, {}, whole_image));
+		}
+		return 0;
+	}
+	if (fast_pass_pairs > 0) {
+		vision::FeatureParams one_pass;
+		one_pass.orb_fast_first_pass_threshold = 0;
+		for (int i = 0; i < fast_pass_pairs; ++i) {
+			row("stereo + pose (default)", run(config, Path::Stereo, seconds, workers));
+			row("stereo + pose, one FAST pass", run(config, Path::Stereo, seconds, workers, Publish::None,
+								vision::GroupFlow::Sparse, {}, {}, one_pass));
 		}
 		return 0;
 	}

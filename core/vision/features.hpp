@@ -41,6 +41,11 @@ struct FeatureParams {
 	/// percentile, so one outstanding corner does not set it) are dropped (0 keeps all), as goodFeaturesToTrack's
 	/// quality level: plain floors do not take a cell's share with the sensor's noise (docs/groups.md, Stop 55).
 	float min_corner_quality = 0.01F;
+	/// With PerCell: FAST's threshold for a first pass over each level; only cells short of their share of such
+	/// corners are searched again at orb_fast_threshold. A speed setting only (FAST's cost grows with the
+	/// corners it finds): the candidates are those of one pass at orb_fast_threshold, whatever this is (at or
+	/// under orb_fast_threshold: one pass).
+	int orb_fast_first_pass_threshold = 25;
 	SurfParams surf; ///< when detector is Surf (max_features above still applies)
 };
 

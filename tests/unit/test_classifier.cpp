@@ -635,6 +635,36 @@ TEST(Features, CandidatesChosenPerCellReachAWeaklyTexturedHalf)
 	EXPECT_EQ(agreeing, compared);
 }
 
+TEST(Features, TheFirstPassAtAHighThresholdFindsTheSameCandidates)
+{
+	// Strong corners on the left, weak ones on the right: at a first-pass threshold of 25 the left's cells hold
+	// their share and the right's are searched again, so both ways of filling a cell are compared.
+	const cv::Mat grey = halves_of_unequal_contrast(0.4);
+	auto params = half_image_params(CandidateSelection::PerCell, 0.01F);
+	params.orb_fast_first_pass_threshold = 0; // one pass at orb_fast_threshold
+	const auto one_pass = detect_orb_per_cell(grey, params);
+	ASSERT_GT(one_pass.size(), 150U);
+	std::vector<cv::KeyPoint> strong_right;
+	cv::FAST(grey.colRange(320, 640), strong_right, 25, true);
+	std::vector<cv::KeyPoint> strong_left;
+	cv::FAST(grey.colRange(0, 320), strong_left, 25, true);
+	// Each of the 16 cells keeps 3 candidates per feature of its 200 / 16: 36.
+	ASSERT_LT(strong_right.size(), 8U * 36U) << "the right's cells must fall short at the first pass";
+	ASSERT_GT(strong_left.size(), 8U * 36U * 2U);
+	for (const int first_pass : {20, 25, 40, 80}) {
+		params.orb_fast_first_pass_threshold = first_pass;
+		const auto two_passes = detect_orb_per_cell(grey, params);
+		ASSERT_EQ(two_passes.size(), one_pass.size()) << "first pass at " << first_pass;
+		for (size_t i = 0; i < one_pass.size(); ++i) {
+			EXPECT_EQ(two_passes[i].pt, one_pass[i].pt)
+				<< "first pass at " << first_pass << ", keypoint " << i;
+			EXPECT_EQ(two_passes[i].octave, one_pass[i].octave);
+			EXPECT_EQ(two_passes[i].response, one_pass[i].response);
+			EXPECT_EQ(two_passes[i].angle, one_pass[i].angle);
+		}
+	}
+}
+
 TEST(Features, TheQualityFloorDropsCornersFarWeakerThanTheBest)
 {
 	// At 0.25 the right half's Harris scores are about 0.4 % of the left's: under a floor of 1 %, over one of 0.1
