@@ -798,6 +798,44 @@ std::optional<MeasuredSpread> measured_spread(const PositionHistory &history, si
 	return spread;
 }
 
+std::optional<VelocityTrend> velocity_trend(const PositionHistory &history, size_t count)
+{
+	std::array<const PositionHistory::Entry *, PositionHistory::kCapacity> measured{};
+	size_t n = 0;
+	double mean_t = 0;
+	cv::Vec3d mean_v(0, 0, 0);
+	for (size_t i = 0; i < history.size && n < count; ++i) {
+		const auto &entry = history.newest(i);
+		if (!entry.measured_velocity)
+			continue;
+		measured[n++] = &entry;
+		mean_t += entry.t_s;
+		mean_v += *entry.measured_velocity;
+	}
+	if (n < 4)
+		return std::nullopt;
+	mean_t /= static_cast<double>(n);
+	mean_v /= static_cast<double>(n);
+	double stt = 0;
+	cv::Vec3d stv(0, 0, 0);
+	for (size_t i = 0; i < n; ++i) {
+		const double dt = measured[i]->t_s - mean_t;
+		stt += dt * dt;
+		stv += dt * (*measured[i]->measured_velocity - mean_v);
+	}
+	if (stt <= 0)
+		return std::nullopt;
+	VelocityTrend trend{stv / stt, {}};
+	cv::Vec3d residuals(0, 0, 0);
+	for (size_t i = 0; i < n; ++i) {
+		const double dt = measured[i]->t_s - mean_t;
+		const cv::Vec3d r = *measured[i]->measured_velocity - mean_v - dt * trend.acceleration;
+		residuals += r.mul(r);
+	}
+	trend.variance = residuals / (static_cast<double>(n - 2) * stt);
+	return trend;
+}
+
 namespace {
 
 /// `smoothed` with its component along `ray` (the line of sight in the world, unit length) replaced by
@@ -1085,14 +1123,48 @@ GroupOutput find_groups(const std::vector<MotionPoint> &points, const GroupMemor
 				world_velocity = fused;
 			}
 			if (has_spread && world_velocity) {
-				const double along_variance = along ? along->variance : averaged_along_variance;
-				const double across_variance = spread.across / averaged * spread.across_persistence;
-				sigma = {std::sqrt(along_variance), std::sqrt(across_variance)};
+				double along_variance = along ? along->variance : averaged_along_variance;
+				double across_variance = spread.across / averaged * spread.across_persistence;
 				// The speed's, to first order: its direction's share of each.
 				const double speed = cv::norm(*world_velocity);
 				const double share = speed > 0 ? world_velocity->dot(ray) / speed : 1;
-				speed_sigma = std::sqrt(share * share * along_variance +
-							(1 - share * share) * across_variance);
+				double speed_variance =
+					share * share * along_variance + (1 - share * share) * across_variance;
+				// An accelerating mover (a walker keeping pace with a rig that speeds up and slows
+				// down, one turning back): the averages describe it as it was some time ago. The line
+				// through the window's positions measures the velocity at the window's middle; the
+				// exponential average is (1 - w) / w frames old. The squared trend overstates the
+				// squared acceleration by its own variance (the measurements' noise), taken off.
+				if (const auto trend = velocity_trend(g.positions, kSpreadMeasurements)) {
+					const double window_lag_s = 0.5 * params.velocity_window_s;
+					const double average_lag_s = context.dt_s * (1 - params.smoothing) /
+								     std::max(params.smoothing, 1e-6);
+					const double along_lag_s = along ? window_lag_s : average_lag_s;
+					const cv::Vec3d &a = trend->acceleration;
+					const double a_along = a.dot(ray);
+					const cv::Vec3d a_across = a - a_along * ray;
+					const cv::Vec3d ray_squared = ray.mul(ray);
+					const double noise_along = trend->variance.dot(ray_squared);
+					const double noise_across =
+						trend->variance.dot(cv::Vec3d(1, 1, 1) - ray_squared);
+					const double along_lag_sq = std::max(a_along * a_along - noise_along, 0.0) *
+								    along_lag_s * along_lag_s;
+					const double across_lag_sq =
+						std::max(a_across.dot(a_across) - noise_across, 0.0) * average_lag_s *
+						average_lag_s;
+					along_variance += along_lag_sq;
+					across_variance += across_lag_sq / 2; // per axis across
+					// The speed's: the share of each along the velocity's direction.
+					const double across_norm = cv::norm(a_across);
+					const double across_share =
+						speed > 0 && across_norm > 0
+							? world_velocity->dot(a_across) / (speed * across_norm)
+							: 0;
+					speed_variance += share * share * along_lag_sq +
+							  across_share * across_share * across_lag_sq;
+				}
+				sigma = {std::sqrt(along_variance), std::sqrt(across_variance)};
+				speed_sigma = std::sqrt(speed_variance);
 			}
 		}
 		if (g.age_frames < params.min_age_frames) {

@@ -237,6 +237,17 @@ struct MeasuredSpread {
 };
 std::optional<MeasuredSpread> measured_spread(const PositionHistory &history, size_t count, const cv::Vec3d &ray);
 
+/// The trend of the newest `count` (at most) measured velocities of a track: each axis's least-squares slope
+/// against time, m/s^2 in the world frame, with the variance of each slope from the line's residuals. An
+/// average of velocities lags an accelerating mover by the acceleration times the average's age, an error
+/// their spread about their mean does not describe. nullopt with fewer than 4 measurements or all at one
+/// time.
+struct VelocityTrend {
+	cv::Vec3d acceleration;
+	cv::Vec3d variance; ///< of each axis's slope, (m/s^2)^2
+};
+std::optional<VelocityTrend> velocity_trend(const PositionHistory &history, size_t count);
+
 /// A group followed across frames.
 struct TrackedGroup {
 	int id = 0;

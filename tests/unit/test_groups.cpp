@@ -362,6 +362,47 @@ TEST(Groups, VelocityAlongASightLineWeighsTheFittedSlopeAndTheMeasuredMeanByThei
 	EXPECT_EQ(full.newest(PositionHistory::kCapacity - 1).t_s, 5.0);
 }
 
+TEST(Groups, VelocityTrendIsTheMeasuredVelocitiesSlope)
+{
+	// A mover speeding up by 0.6 m/s^2 along z and slowing by 0.2 across (x), its measurements off by
+	// alternating errors of 0.05 m/s (which tilt an even count's line by 2 * 0.05 / (n * dt) at most).
+	PositionHistory history;
+	for (int k = 0; k < 30; ++k) {
+		const double t = 0.1 * k;
+		const double error = k % 2 == 0 ? 0.05 : -0.05;
+		history.push({t, cv::Vec3d(0, 0, 0), cv::Vec3d(1.0 - 0.2 * t + error, 0, 1.3 + 0.6 * t + error)});
+	}
+	const auto trend = velocity_trend(history, 16);
+	ASSERT_TRUE(trend.has_value());
+	EXPECT_NEAR(trend->acceleration[0], -0.2, 2 * 0.05 / (16 * 0.1));
+	EXPECT_NEAR(trend->acceleration[1], 0.0, 1e-12);
+	EXPECT_NEAR(trend->acceleration[2], 0.6, 2 * 0.05 / (16 * 0.1));
+	// Each slope's variance from the line's residuals: errors of 0.05 over 16 samples 0.1 s apart
+	// (sum of squared times 3.4 s^2): about 0.05^2 / 3.4, none on the axis without errors.
+	EXPECT_NEAR(trend->variance[2], 0.05 * 0.05 / 3.4, 0.3 * 0.05 * 0.05 / 3.4);
+	EXPECT_NEAR(trend->variance[1], 0.0, 1e-20);
+	// The newest only: a turn back 20 frames ago does not count.
+	PositionHistory turned = history;
+	for (int k = 0; k < 16; ++k)
+		turned.push({3.0 + 0.1 * k, cv::Vec3d(0, 0, 0), cv::Vec3d(0, 0, -1.0)});
+	const auto steady = velocity_trend(turned, 16);
+	ASSERT_TRUE(steady.has_value());
+	EXPECT_NEAR(cv::norm(steady->acceleration), 0.0, 1e-9);
+	// Entries without a measurement are skipped; fewer than four measurements or one instant tell no trend.
+	PositionHistory sparse;
+	for (int k = 0; k < 12; ++k)
+		sparse.push({0.1 * k, cv::Vec3d(0, 0, 0),
+			     k % 4 == 0 ? std::optional<cv::Vec3d>(cv::Vec3d(0, 0, 0.5 * k)) : std::nullopt});
+	EXPECT_FALSE(velocity_trend(sparse, 16).has_value());
+	sparse.push({1.2, cv::Vec3d(0, 0, 0), cv::Vec3d(0, 0, 6.0)});
+	ASSERT_TRUE(velocity_trend(sparse, 16).has_value());
+	EXPECT_NEAR(velocity_trend(sparse, 16)->acceleration[2], 5.0, 1e-9);
+	PositionHistory instant;
+	for (int k = 0; k < 6; ++k)
+		instant.push({1.0, cv::Vec3d(0, 0, 0), cv::Vec3d(0, 0, k)});
+	EXPECT_FALSE(velocity_trend(instant, 16).has_value());
+}
+
 TEST(Groups, MeasuredSpreadCountsPersistentErrorsAsFewerMeasurements)
 {
 	const cv::Vec3d ray(0, 0, 1);
@@ -522,6 +563,47 @@ TEST(Groups, AGroupsVelocityComesWithItsUncertainty)
 			EXPECT_LT(std::abs(*g.speed_mps - 1.5), 3 * *g.speed_sigma_mps + 0.02)
 				<< "age " << g.age_frames;
 		}
+}
+
+TEST(Groups, AnAcceleratingMoversSpeedSigmaCoversTheAveragesLag)
+{
+	// A mover receding along the sight and speeding up by 1 m/s^2 (0.5 m/s at the start), its frame-to-frame
+	// measurements off by alternating errors of 0.05 m/s: the averages describe it as it was about a quarter
+	// of a second ago, some 0.25 m/s slow, while their spread alone says a few cm/s.
+	std::mt19937 rng(5);
+	GroupParams params;
+	AffinityPropagation workspace;
+	GroupMemory memory;
+	GroupMotionContext context = tenth_of_a_second();
+	context.curr_from_prev = geometry::Pose{};
+	context.world_from_curr = geometry::Pose{};
+	const auto z_at = [](double t) { return 5 + 0.5 * t + 0.5 * t * t; };
+	int judged = 0, covered = 0;
+	for (int frame = 0; frame < 30; ++frame) {
+		auto points = crossing_frame(frame, rng);
+		points.resize(140);
+		const double t = 0.1 * frame;
+		const double error = frame % 2 == 0 ? 0.05 : -0.05;
+		const double step = z_at(t) - z_at(t - context.dt_s) + error * context.dt_s;
+		for (size_t i = 120; i < points.size(); ++i) {
+			const cv::Vec3f now(0.01F * (static_cast<float>(i) - 130), 0, static_cast<float>(z_at(t)));
+			points[i].xyz = now;
+			points[i].prev_xyz = now - cv::Vec3f(0, 0, static_cast<float>(step));
+		}
+		GroupOutput out = find_groups(points, frame == 0 ? nullptr : &memory, context, params, workspace);
+		memory = out.memory;
+		if (out.groups.size() != 1 || !out.groups[0].speed_mps || out.groups[0].age_frames < 10)
+			continue;
+		const TargetGroup &g = out.groups[0];
+		ASSERT_TRUE(g.speed_sigma_mps.has_value());
+		const double truth = 0.5 + t;
+		const double miss = std::abs(*g.speed_mps - truth);
+		EXPECT_GT(miss, 0.1) << "frame " << frame << ": the lag is there to cover";
+		++judged;
+		covered += miss <= 2 * *g.speed_sigma_mps;
+	}
+	ASSERT_GE(judged, 15);
+	EXPECT_GE(covered, judged * 9 / 10);
 }
 
 TEST(Groups, AFarMoverHiddenByANearOneComesOutUnderItsId)
