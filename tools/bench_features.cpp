@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <functional>
+#include <optional>
 
 #include <CLI/CLI.hpp>
 #include <opencv2/core/utility.hpp>
@@ -91,14 +92,14 @@ int main(int argc, char **argv)
 			return static_cast<size_t>(d.rows);
 		};
 	};
-	// first_pass < 0: the default first FAST pass; 0: one pass at the configured threshold (the same keypoints)
-	auto bucketed_orb = [&](vision::CandidateSelection selection, int first_pass = -1) {
+	// first_pass: ORB's first FAST threshold where not the default (0: one pass, the same keypoints)
+	auto bucketed_orb = [&](vision::CandidateSelection selection, std::optional<int> first_pass = std::nullopt) {
 		return [&colour, n, selection, first_pass] {
 			vision::FeatureParams p;
 			p.max_features = n;
 			p.candidate_selection = selection;
-			if (first_pass >= 0)
-				p.orb_fast_first_pass_threshold = first_pass;
+			if (first_pass)
+				p.orb_fast_first_pass_threshold = *first_pass;
 			return vision::extract_features(colour, p, 1).keypoints.size();
 		};
 	};

@@ -327,34 +327,31 @@ int main(int argc, char **argv)
 		    "pipeline", "fps", "CPU ms", "p50 ms", "p90 ms", "p99 ms", "max ms", "1st 10", "ring", "pool",
 		    "extr.", "stereo", "match", "class.", "pose", "flow", "groups");
 	std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+	// The default stereo path and one variant in turn, `pairs` times, so a noisy machine's spells fall on both.
+	const auto alternate = [&](int pairs, const char *variant, const vision::MatchParams &matching,
+				   const vision::FeatureParams &features) {
+		for (int i = 0; i < pairs; ++i) {
+			row("stereo + pose (default)", run(config, Path::Stereo, seconds, workers));
+			row(variant, run(config, Path::Stereo, seconds, workers, Publish::None,
+					 vision::GroupFlow::Sparse, {}, matching, features));
+		}
+	};
 	vision::MatchParams no_follow_lost;
 	no_follow_lost.follow_lost = false;
 	if (follow_lost_pairs > 0) {
-		for (int i = 0; i < follow_lost_pairs; ++i) {
-			row("stereo + pose (default)", run(config, Path::Stereo, seconds, workers));
-			row("stereo + pose, no follow_lost", run(config, Path::Stereo, seconds, workers, Publish::None,
-								 vision::GroupFlow::Sparse, {}, no_follow_lost));
-		}
+		alternate(follow_lost_pairs, "stereo + pose, no follow_lost", no_follow_lost, {});
 		return 0;
 	}
 	if (candidate_pairs > 0) {
 		vision::FeatureParams whole_image;
 		whole_image.candidate_selection = vision::CandidateSelection::WholeImage;
-		for (int i = 0; i < candidate_pairs; ++i) {
-			row("stereo + pose (default)", run(config, Path::Stereo, seconds, workers));
-			row("stereo + pose, whole_image", run(config, Path::Stereo, seconds, workers, Publish::None,
-							      vision::GroupFlow::Sparse, {}, {}, whole_image));
-		}
+		alternate(candidate_pairs, "stereo + pose, whole_image", {}, whole_image);
 		return 0;
 	}
 	if (fast_pass_pairs > 0) {
 		vision::FeatureParams one_pass;
 		one_pass.orb_fast_first_pass_threshold = 0;
-		for (int i = 0; i < fast_pass_pairs; ++i) {
-			row("stereo + pose (default)", run(config, Path::Stereo, seconds, workers));
-			row("stereo + pose, one FAST pass", run(config, Path::Stereo, seconds, workers, Publish::None,
-								vision::GroupFlow::Sparse, {}, {}, one_pass));
-		}
+		alternate(fast_pass_pairs, "stereo + pose, one FAST pass", {}, one_pass);
 		return 0;
 	}
 	if (default_only) {

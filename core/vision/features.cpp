@@ -201,9 +201,8 @@ std::vector<cv::KeyPoint> detect_orb_per_cell(const cv::Mat &grey, const Feature
 	// share of such corners runs again at the configured threshold over its own region. FAST's corners at a
 	// threshold are exactly those at a lower one scoring at least that much (its score does not depend on
 	// the threshold, and non-maximum suppression only drops a corner for a stronger neighbour, which the
-	// higher threshold finds too), so the
-	// candidates are the same as from one pass at the configured threshold
-	// (Features.TheFirstPassAtAHighThresholdFindsTheSameCandidates).
+	// higher threshold finds too), so the candidates are the same as from one pass at the configured
+	// threshold (Features.TheFirstPassAtAHighThresholdFindsTheSameCandidates).
 	const int low_threshold = params.orb_fast_threshold;
 	const int high_threshold = std::max(low_threshold, params.orb_fast_first_pass_threshold);
 	std::vector<std::vector<cv::KeyPoint>> buckets(static_cast<size_t>(cells));

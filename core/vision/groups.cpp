@@ -754,13 +754,30 @@ constexpr double kMaxPersistence = 0.7;
 
 } // namespace
 
-std::optional<MeasuredSpread> measured_spread(const PositionHistory &history, size_t count, const cv::Vec3d &ray)
+namespace {
+
+using MeasuredEntries = std::array<const PositionHistory::Entry *, PositionHistory::kCapacity>;
+
+/// The newest `count` (at most) entries of `history` that carry a measured velocity, newest first, into
+/// `entries`; returns how many.
+size_t newest_measured(const PositionHistory &history, size_t count, MeasuredEntries &entries)
 {
-	std::array<cv::Vec3d, PositionHistory::kCapacity> velocities;
 	size_t n = 0;
 	for (size_t i = 0; i < history.size && n < count; ++i)
-		if (const auto &v = history.newest(i).measured_velocity)
-			velocities[n++] = *v;
+		if (history.newest(i).measured_velocity)
+			entries[n++] = &history.newest(i);
+	return n;
+}
+
+} // namespace
+
+std::optional<MeasuredSpread> measured_spread(const PositionHistory &history, size_t count, const cv::Vec3d &ray)
+{
+	MeasuredEntries entries{};
+	const size_t n = newest_measured(history, count, entries);
+	std::array<cv::Vec3d, PositionHistory::kCapacity> velocities;
+	for (size_t i = 0; i < n; ++i)
+		velocities[i] = *entries[i]->measured_velocity;
 	if (n < 4)
 		return std::nullopt;
 	cv::Vec3d mean(0, 0, 0);
@@ -800,20 +817,16 @@ std::optional<MeasuredSpread> measured_spread(const PositionHistory &history, si
 
 std::optional<VelocityTrend> velocity_trend(const PositionHistory &history, size_t count)
 {
-	std::array<const PositionHistory::Entry *, PositionHistory::kCapacity> measured{};
-	size_t n = 0;
-	double mean_t = 0;
-	cv::Vec3d mean_v(0, 0, 0);
-	for (size_t i = 0; i < history.size && n < count; ++i) {
-		const auto &entry = history.newest(i);
-		if (!entry.measured_velocity)
-			continue;
-		measured[n++] = &entry;
-		mean_t += entry.t_s;
-		mean_v += *entry.measured_velocity;
-	}
+	MeasuredEntries measured{};
+	const size_t n = newest_measured(history, count, measured);
 	if (n < 4)
 		return std::nullopt;
+	double mean_t = 0;
+	cv::Vec3d mean_v(0, 0, 0);
+	for (size_t i = 0; i < n; ++i) {
+		mean_t += measured[i]->t_s;
+		mean_v += *measured[i]->measured_velocity;
+	}
 	mean_t /= static_cast<double>(n);
 	mean_v /= static_cast<double>(n);
 	double stt = 0;
